@@ -1,0 +1,202 @@
+//! `portico build`: imported model → LODs → (optionally flattened, baked) geometry segments →
+//! header → an atomically written display database.
+//!
+//! LOD generation and flattening run in parallel across objects with rayon; segments are then
+//! written in order, so the same input always gives the same file.
+
+use crate::bake::bake;
+use crate::error::Result;
+use crate::format::writer::{DbWriter, WriteSummary};
+use crate::format::{Header, InstanceRecord, LodRecord, ObjectRecord, SegmentKind};
+use crate::geometry::{Aabb, encode_geometry};
+use crate::lod::{LodMesh, complete_lods};
+use crate::model::{Instance, Model};
+use glam::Mat4;
+use rayon::prelude::*;
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+/// Instances flattened per parallel batch (bounds memory on huge flattened builds).
+const FLATTEN_BATCH: usize = 512;
+
+/// Build settings.
+#[derive(Debug, Clone, Default)]
+pub struct BuildOptions {
+    /// Give every instance its own world-space geometry with baked lighting (the out-of-core
+    /// stress case) instead of sharing definitions.
+    pub flatten: bool,
+    /// Model name stored in the header (default: the first source's file stem).
+    pub name: Option<String>,
+}
+
+/// Receives progress from long build steps (the CLI draws progress bars with it).
+pub trait Observer: Sync {
+    /// A step named `name` with `total` units of work starts.
+    fn stage(&self, _name: &str, _total: u64) {}
+    /// `n` more units are done.
+    fn advance(&self, _n: u64) {}
+}
+
+/// An [`Observer`] that ignores everything.
+pub struct Quiet;
+impl Observer for Quiet {}
+
+/// What a build did and how long each step took.
+#[derive(Debug, Clone)]
+pub struct BuildReport {
+    /// The written file.
+    pub written: WriteSummary,
+    /// Time spent making LODs.
+    pub lod_time: Duration,
+    /// Time spent encoding and writing geometry and the header.
+    pub write_time: Duration,
+}
+
+/// Builds a display database at `out` from an imported model.
+pub fn build(model: Model, out: &Path, opts: &BuildOptions, obs: &dyn Observer) -> Result<BuildReport> {
+    let t0 = Instant::now();
+    let Model { materials, defs, instances, sources } = model;
+    obs.stage("LODs", defs.len() as u64);
+    let lods: Vec<(String, u32, Vec<LodMesh>)> = defs
+        .into_par_iter()
+        .map(|d| {
+            let l = complete_lods(d.lods);
+            obs.advance(1);
+            (d.name, d.material, l)
+        })
+        .collect();
+    let lod_time = t0.elapsed();
+
+    let t1 = Instant::now();
+    let mut w = DbWriter::create(out)?;
+    let objects = write_objects(&mut w, &lods, opts.flatten, obs)?;
+    let records = if opts.flatten {
+        write_flattened(&mut w, &lods, &instances, obs)?
+    } else {
+        instances
+            .iter()
+            .map(|i| instance_record(i, &lods[i.def as usize].2, None))
+            .collect()
+    };
+    let bounds = records.iter().fold(Aabb::EMPTY, |b, r| b.union(&r.bounds));
+    let name = opts.name.clone().unwrap_or_else(|| {
+        sources
+            .first()
+            .and_then(|s| Path::new(s).file_stem())
+            .map_or_else(|| "model".to_string(), |s| s.to_string_lossy().into_owned())
+    });
+    let header = Header {
+        name,
+        sources,
+        flattened: opts.flatten,
+        bounds,
+        materials,
+        objects,
+        instances: records,
+    };
+    let written = w.finish(&header)?;
+    Ok(BuildReport {
+        written,
+        lod_time,
+        write_time: t1.elapsed(),
+    })
+}
+
+/// Writes each definition's LODs (unless flattening) and returns the object records.
+fn write_objects(
+    w: &mut DbWriter,
+    lods: &[(String, u32, Vec<LodMesh>)],
+    flatten: bool,
+    obs: &dyn Observer,
+) -> Result<Vec<ObjectRecord>> {
+    if !flatten {
+        obs.stage("geometry", lods.len() as u64);
+    }
+    lods.iter()
+        .map(|(name, material, levels)| {
+            let records = if flatten {
+                Vec::new()
+            } else {
+                obs.advance(1);
+                levels
+                    .iter()
+                    .map(|l| write_lod(w, l, encode_geometry(&l.mesh), l.error))
+                    .collect::<Result<_>>()?
+            };
+            Ok(ObjectRecord {
+                name: name.clone(),
+                bounds: levels.first().map_or(Aabb::EMPTY, |l| l.mesh.bounds()),
+                material: *material,
+                lods: records,
+            })
+        })
+        .collect()
+}
+
+/// Transforms, bakes and writes every instance's own copy of its LODs (in parallel batches).
+fn write_flattened(
+    w: &mut DbWriter,
+    lods: &[(String, u32, Vec<LodMesh>)],
+    instances: &[Instance],
+    obs: &dyn Observer,
+) -> Result<Vec<InstanceRecord>> {
+    obs.stage("flatten", instances.len() as u64);
+    let mut records = Vec::with_capacity(instances.len());
+    for batch in instances.chunks(FLATTEN_BATCH) {
+        let encoded: Vec<Vec<(Vec<u8>, &LodMesh, f32)>> = batch
+            .par_iter()
+            .map(|inst| {
+                let scale = max_scale(&inst.transform);
+                lods[inst.def as usize]
+                    .2
+                    .iter()
+                    .map(|l| {
+                        let mut m = l.mesh.transformed(&inst.transform);
+                        bake(&mut m);
+                        (encode_geometry(&m), l, l.error * scale)
+                    })
+                    .collect()
+            })
+            .collect();
+        for (inst, levels) in batch.iter().zip(encoded) {
+            let own = levels
+                .into_iter()
+                .map(|(bytes, l, err)| write_lod(w, l, bytes, err))
+                .collect::<Result<Vec<_>>>()?;
+            records.push(instance_record(inst, &lods[inst.def as usize].2, Some(own)));
+            obs.advance(1);
+        }
+    }
+    Ok(records)
+}
+
+fn write_lod(w: &mut DbWriter, l: &LodMesh, bytes: Vec<u8>, error: f32) -> Result<LodRecord> {
+    Ok(LodRecord {
+        segment: w.add_segment(SegmentKind::Geometry, &bytes)?,
+        triangles: l.mesh.triangle_count() as u32,
+        vertices: l.mesh.vertices.len() as u32,
+        error,
+    })
+}
+
+/// The header record of an instance; flattened instances get their own LODs and identity.
+fn instance_record(inst: &Instance, levels: &[LodMesh], own: Option<Vec<LodRecord>>) -> InstanceRecord {
+    let local = levels.first().map_or(Aabb::EMPTY, |l| l.mesh.bounds());
+    let transform = if own.is_some() { Mat4::IDENTITY } else { inst.transform };
+    InstanceRecord {
+        name: inst.name.clone(),
+        object: inst.def,
+        transform: transform.to_cols_array(),
+        material: inst.material,
+        bounds: local.transformed(&inst.transform),
+        occluder: inst.occluder,
+        tags: inst.tags.iter().map(|(k, v)| (k.clone(), v.clone())).collect(),
+        lods: own,
+    }
+}
+
+/// Largest axis scale of a transform (turns a local geometric error into a world one).
+fn max_scale(m: &Mat4) -> f32 {
+    let (s, _, _) = m.to_scale_rotation_translation();
+    s.abs().max_element()
+}

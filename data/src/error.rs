@@ -1,0 +1,91 @@
+//! The one error type of the `data` crate: every variant names the file and the problem, so the
+//! CLI can print it on one line (`error: building.portico: truncated: ...`).
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong while importing, building, or reading a display database.
+#[derive(Debug, thiserror::Error)]
+pub enum DataError {
+    /// The operating system refused a read, write, rename or map.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file involved.
+        path: PathBuf,
+        /// What the OS said.
+        source: std::io::Error,
+    },
+    /// The file does not start with the Portico magic bytes: it is some other kind of file.
+    #[error("{}: not a Portico display database (bad magic bytes)", path.display())]
+    NotPortico {
+        /// The file involved.
+        path: PathBuf,
+    },
+    /// The file was written by a different, incompatible version of the format.
+    #[error("{}: format version {found} is not supported (this build reads version {expected}); rebuild it with `portico build`", path.display())]
+    Version {
+        /// The file involved.
+        path: PathBuf,
+        /// The version found in the prologue.
+        found: u32,
+        /// The version this build reads and writes.
+        expected: u32,
+    },
+    /// The file is shorter than its prologue says: an interrupted copy or download.
+    #[error("{}: truncated: the prologue records {expected} bytes but the file has {actual}", path.display())]
+    Truncated {
+        /// The file involved.
+        path: PathBuf,
+        /// Length recorded in the prologue.
+        expected: u64,
+        /// Length on disk.
+        actual: u64,
+    },
+    /// A checksum or structural check failed.
+    #[error("{}: corrupt: {what}", path.display())]
+    Corrupt {
+        /// The file involved.
+        path: PathBuf,
+        /// Which check failed, and where.
+        what: String,
+    },
+    /// A model file could not be imported.
+    #[error("{}: {what}", path.display())]
+    Import {
+        /// The model file involved.
+        path: PathBuf,
+        /// What was wrong with it.
+        what: String,
+    },
+    /// A caller asked for something that does not exist (e.g. a segment id out of range).
+    #[error("{0}")]
+    NotFound(String),
+}
+
+impl DataError {
+    /// Wraps an I/O error with the path it concerns.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        DataError::Io {
+            path: path.into(),
+            source,
+        }
+    }
+
+    /// A corruption error for `path`.
+    pub fn corrupt(path: impl Into<PathBuf>, what: impl Into<String>) -> Self {
+        DataError::Corrupt {
+            path: path.into(),
+            what: what.into(),
+        }
+    }
+
+    /// An import error for `path`.
+    pub fn import(path: impl Into<PathBuf>, what: impl Into<String>) -> Self {
+        DataError::Import {
+            path: path.into(),
+            what: what.into(),
+        }
+    }
+}
+
+/// Result alias for the `data` crate.
+pub type Result<T, E = DataError> = std::result::Result<T, E>;

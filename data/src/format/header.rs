@@ -1,0 +1,137 @@
+//! The header: everything about the model except the geometry bytes (Funkhouser Fig. 3.23:
+//! object definitions, instances and their LOD tables), bincode-encoded.
+
+use super::{SegmentEntry, SegmentKind};
+use crate::geometry::Aabb;
+use crate::model::Material;
+use serde::{Deserialize, Serialize};
+
+/// The decoded header of a display database.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Header {
+    /// Model name (the first source file's stem).
+    pub name: String,
+    /// The model files it was built from.
+    pub sources: Vec<String>,
+    /// Whether instances carry their own baked geometry (`portico build --flatten`).
+    pub flattened: bool,
+    /// World-space bounds of the whole model.
+    pub bounds: Aabb,
+    /// Materials (index 0 is the default).
+    pub materials: Vec<Material>,
+    /// Object definitions.
+    pub objects: Vec<ObjectRecord>,
+    /// Object instances.
+    pub instances: Vec<InstanceRecord>,
+}
+
+/// One LOD of an object: where its geometry is and what it costs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct LodRecord {
+    /// Geometry segment id.
+    pub segment: u32,
+    /// Triangle count.
+    pub triangles: u32,
+    /// Vertex count.
+    pub vertices: u32,
+    /// Geometric error (metres) against the finest LOD: the benefit's accuracy term uses it.
+    pub error: f32,
+}
+
+/// An object definition.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ObjectRecord {
+    /// Name from the source.
+    pub name: String,
+    /// Bounds of the finest LOD in the definition's coordinates.
+    pub bounds: Aabb,
+    /// Default material.
+    pub material: u32,
+    /// LODs, finest first.
+    pub lods: Vec<LodRecord>,
+}
+
+/// A placed object.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct InstanceRecord {
+    /// Name from the source.
+    pub name: String,
+    /// Index into [`Header::objects`].
+    pub object: u32,
+    /// Column-major object-to-world matrix (identity when `lods` holds world-space geometry).
+    pub transform: [f32; 16],
+    /// Material index.
+    pub material: u32,
+    /// World-space bounds.
+    pub bounds: Aabb,
+    /// Structural occluder (wall, floor, ceiling).
+    pub occluder: bool,
+    /// Tags from the source (`kind`, `room`, `storey`, ...), sorted by key.
+    pub tags: Vec<(String, String)>,
+    /// This instance's own LODs (world space, e.g. baked lighting), overriding the definition's
+    /// (Funkhouser §3.1: instances may store their own geometry). `None` = inherit.
+    pub lods: Option<Vec<LodRecord>>,
+}
+
+impl InstanceRecord {
+    /// The value of a tag, if present.
+    pub fn tag(&self, key: &str) -> Option<&str> {
+        self.tags
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, v)| v.as_str())
+    }
+}
+
+impl Header {
+    /// The LODs an instance draws with: its own, else its definition's (finest first).
+    pub fn lods_of<'a>(&'a self, inst: &'a InstanceRecord) -> &'a [LodRecord] {
+        match &inst.lods {
+            Some(l) => l,
+            None => self
+                .objects
+                .get(inst.object as usize)
+                .map_or(&[], |o| &o.lods),
+        }
+    }
+
+    /// Checks every cross-reference against the segment index, so later lookups cannot fail.
+    pub fn validate(&self, segments: &[SegmentEntry]) -> Result<(), String> {
+        let check_lods = |lods: &[LodRecord], what: &dyn Fn() -> String| -> Result<(), String> {
+            if lods.is_empty() {
+                return Err(format!("{} has no LODs", what()));
+            }
+            for l in lods {
+                let seg = segments
+                    .get(l.segment as usize)
+                    .ok_or_else(|| format!("{} refers to missing segment {}", what(), l.segment))?;
+                if SegmentKind::from_u16(seg.kind) != Some(SegmentKind::Geometry) {
+                    return Err(format!("{} refers to non-geometry segment {}", what(), l.segment));
+                }
+            }
+            Ok(())
+        };
+        for (i, o) in self.objects.iter().enumerate() {
+            // A flattened database may leave definitions without shared geometry.
+            if !o.lods.is_empty() {
+                check_lods(&o.lods, &|| format!("object {i}"))?;
+            }
+            if o.material as usize >= self.materials.len() {
+                return Err(format!("object {i} has material {} of {}", o.material, self.materials.len()));
+            }
+        }
+        for (i, inst) in self.instances.iter().enumerate() {
+            if inst.object as usize >= self.objects.len() {
+                return Err(format!("instance {i} refers to missing object {}", inst.object));
+            }
+            if inst.material as usize >= self.materials.len() {
+                return Err(format!("instance {i} has material {} of {}", inst.material, self.materials.len()));
+            }
+            if inst.transform.iter().any(|x| !x.is_finite()) {
+                return Err(format!("instance {i} has a non-finite transform"));
+            }
+            check_lods(self.lods_of(inst), &|| format!("instance {i}"))?;
+        }
+        Ok(())
+    }
+}

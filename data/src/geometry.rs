@@ -1,0 +1,395 @@
+//! In-memory meshes and the on-disk geometry segment layout.
+//!
+//! A geometry segment is laid out for direct GPU upload (DESIGN §2): a 32-byte header, then the
+//! interleaved vertex stream (`Vertex`, 20 bytes: position `f32x3`, normal `snorm8x4`, colour
+//! `unorm8x4`), then the index stream (`u16` when every index fits, else `u32`), each 4-byte
+//! aligned. A client binds the vertex and index ranges straight from the bytes it received.
+
+use bytemuck::{Pod, Zeroable};
+use glam::{Mat3, Mat4, Vec3};
+use serde::{Deserialize, Serialize};
+
+/// One interleaved vertex as stored on disk and in GPU buffers.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct Vertex {
+    /// Position in the mesh's coordinate system (metres).
+    pub position: [f32; 3],
+    /// Unit normal, signed-normalised bytes (x, y, z, 0).
+    pub normal: [i8; 4],
+    /// Linear RGBA colour, unsigned-normalised bytes.
+    pub color: [u8; 4],
+}
+
+impl Vertex {
+    /// Builds a vertex from float attributes, quantising normal and colour.
+    pub fn new(position: [f32; 3], normal: [f32; 3], color: [f32; 4]) -> Self {
+        let n = Vec3::from(normal).normalize_or_zero();
+        let q = |x: f32| (x.clamp(-1.0, 1.0) * 127.0).round() as i8;
+        let c = |x: f32| (x.clamp(0.0, 1.0) * 255.0).round() as u8;
+        Vertex {
+            position,
+            normal: [q(n.x), q(n.y), q(n.z), 0],
+            color: [c(color[0]), c(color[1]), c(color[2]), c(color[3])],
+        }
+    }
+
+    /// The normal as a float vector (not re-normalised).
+    pub fn normal_f32(&self) -> Vec3 {
+        Vec3::new(
+            self.normal[0] as f32 / 127.0,
+            self.normal[1] as f32 / 127.0,
+            self.normal[2] as f32 / 127.0,
+        )
+    }
+
+    /// The colour as floats in 0..=1.
+    pub fn color_f32(&self) -> [f32; 4] {
+        self.color.map(|c| c as f32 / 255.0)
+    }
+}
+
+/// Axis-aligned bounding box. An empty box has `min > max`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Aabb {
+    /// Smallest corner.
+    pub min: [f32; 3],
+    /// Largest corner.
+    pub max: [f32; 3],
+}
+
+impl Aabb {
+    /// The empty box, the identity for [`Aabb::union`].
+    pub const EMPTY: Aabb = Aabb {
+        min: [f32::INFINITY; 3],
+        max: [f32::NEG_INFINITY; 3],
+    };
+
+    /// Whether the box contains no point.
+    pub fn is_empty(&self) -> bool {
+        (0..3).any(|i| self.min[i] > self.max[i])
+    }
+
+    /// Grows the box to contain `p`.
+    pub fn include(&mut self, p: Vec3) {
+        self.min = Vec3::from(self.min).min(p).into();
+        self.max = Vec3::from(self.max).max(p).into();
+    }
+
+    /// The smallest box containing both.
+    pub fn union(&self, other: &Aabb) -> Aabb {
+        Aabb {
+            min: Vec3::from(self.min).min(Vec3::from(other.min)).into(),
+            max: Vec3::from(self.max).max(Vec3::from(other.max)).into(),
+        }
+    }
+
+    /// Extent along each axis (zero for an empty box).
+    pub fn size(&self) -> Vec3 {
+        if self.is_empty() {
+            Vec3::ZERO
+        } else {
+            Vec3::from(self.max) - Vec3::from(self.min)
+        }
+    }
+
+    /// The centre point.
+    pub fn center(&self) -> Vec3 {
+        (Vec3::from(self.min) + Vec3::from(self.max)) * 0.5
+    }
+
+    /// The box of the eight transformed corners (a conservative world box).
+    pub fn transformed(&self, m: &Mat4) -> Aabb {
+        let mut out = Aabb::EMPTY;
+        if self.is_empty() {
+            return out;
+        }
+        for i in 0..8 {
+            let c = Vec3::new(
+                if i & 1 == 0 { self.min[0] } else { self.max[0] },
+                if i & 2 == 0 { self.min[1] } else { self.max[1] },
+                if i & 4 == 0 { self.min[2] } else { self.max[2] },
+            );
+            out.include(m.transform_point3(c));
+        }
+        out
+    }
+}
+
+/// An indexed triangle list with interleaved vertices: one LOD of one object.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Mesh {
+    /// Vertex data.
+    pub vertices: Vec<Vertex>,
+    /// Triangle list; every index is `< vertices.len()`.
+    pub indices: Vec<u32>,
+}
+
+impl Mesh {
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    /// Bounding box of the vertices.
+    pub fn bounds(&self) -> Aabb {
+        let mut b = Aabb::EMPTY;
+        for v in &self.vertices {
+            b.include(Vec3::from(v.position));
+        }
+        b
+    }
+
+    /// Checks the invariants: whole triangles, indices in range.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.indices.len() % 3 != 0 {
+            return Err(format!(
+                "index count {} is not a multiple of 3",
+                self.indices.len()
+            ));
+        }
+        let n = self.vertices.len() as u32;
+        if let Some(bad) = self.indices.iter().find(|&&i| i >= n) {
+            return Err(format!(
+                "index {bad} out of range for {n} vertices"
+            ));
+        }
+        Ok(())
+    }
+
+    /// The mesh with positions and normals transformed by `m` (normals by its inverse transpose).
+    pub fn transformed(&self, m: &Mat4) -> Mesh {
+        let normal_matrix = Mat3::from_mat4(*m).inverse().transpose();
+        let vertices = self
+            .vertices
+            .iter()
+            .map(|v| {
+                let p = m.transform_point3(Vec3::from(v.position));
+                let n = normal_matrix * v.normal_f32();
+                Vertex::new(p.into(), n.into(), v.color_f32())
+            })
+            .collect();
+        Mesh {
+            vertices,
+            indices: self.indices.clone(),
+        }
+    }
+
+    /// Area-weighted average colour of the surface (Maciel §5.2's average-colour box uses it).
+    pub fn average_color(&self) -> [f32; 4] {
+        let mut sum = [0.0f64; 4];
+        let mut total = 0.0f64;
+        for t in self.indices.chunks_exact(3) {
+            let [a, b, c] = [t[0], t[1], t[2]].map(|i| self.vertices[i as usize]);
+            let area = (Vec3::from(b.position) - Vec3::from(a.position))
+                .cross(Vec3::from(c.position) - Vec3::from(a.position))
+                .length() as f64
+                * 0.5;
+            for v in [a, b, c] {
+                for (s, x) in sum.iter_mut().zip(v.color_f32()) {
+                    *s += area * x as f64 / 3.0;
+                }
+            }
+            total += area;
+        }
+        if total <= 0.0 {
+            return [0.5, 0.5, 0.5, 1.0];
+        }
+        sum.map(|s| (s / total) as f32)
+    }
+}
+
+/// Magic number at the start of every geometry segment ("PGEO", little-endian).
+pub const GEOMETRY_MAGIC: u32 = u32::from_le_bytes(*b"PGEO");
+/// Layout version of geometry segments.
+pub const GEOMETRY_VERSION: u16 = 1;
+/// Flag: the index stream holds `u32` indices (else `u16`).
+pub const GEOMETRY_U32_INDICES: u16 = 1;
+
+/// The fixed 32-byte header at the start of a geometry segment.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Pod, Zeroable)]
+pub struct GeometryHeader {
+    /// [`GEOMETRY_MAGIC`].
+    pub magic: u32,
+    /// [`GEOMETRY_VERSION`].
+    pub version: u16,
+    /// [`GEOMETRY_U32_INDICES`] or 0.
+    pub flags: u16,
+    /// Number of vertices.
+    pub vertex_count: u32,
+    /// Number of indices (3 per triangle).
+    pub index_count: u32,
+    /// Byte offset of the vertex stream within the segment.
+    pub vertex_offset: u32,
+    /// Byte offset of the index stream within the segment.
+    pub index_offset: u32,
+    /// Reserved, zero.
+    pub reserved: [u32; 2],
+}
+
+/// Encodes a mesh as a geometry segment (header, vertices, indices).
+pub fn encode_geometry(mesh: &Mesh) -> Vec<u8> {
+    let wide = mesh.vertices.len() > u16::MAX as usize + 1;
+    let vertex_offset = std::mem::size_of::<GeometryHeader>();
+    let index_offset = vertex_offset + mesh.vertices.len() * std::mem::size_of::<Vertex>();
+    let header = GeometryHeader {
+        magic: GEOMETRY_MAGIC,
+        version: GEOMETRY_VERSION,
+        flags: if wide { GEOMETRY_U32_INDICES } else { 0 },
+        vertex_count: mesh.vertices.len() as u32,
+        index_count: mesh.indices.len() as u32,
+        vertex_offset: vertex_offset as u32,
+        index_offset: index_offset as u32,
+        reserved: [0; 2],
+    };
+    let mut out = Vec::with_capacity(index_offset + mesh.indices.len() * 4 + 4);
+    out.extend_from_slice(bytemuck::bytes_of(&header));
+    out.extend_from_slice(bytemuck::cast_slice(&mesh.vertices));
+    if wide {
+        out.extend_from_slice(bytemuck::cast_slice(&mesh.indices));
+    } else {
+        for &i in &mesh.indices {
+            out.extend_from_slice(&(i as u16).to_le_bytes());
+        }
+        if out.len() % 4 != 0 {
+            out.extend_from_slice(&[0, 0]);
+        }
+    }
+    out
+}
+
+/// A validated, borrowed view of a geometry segment's bytes.
+#[derive(Debug, Clone, Copy)]
+pub struct GeometryView<'a> {
+    /// The parsed header.
+    pub header: GeometryHeader,
+    /// The raw vertex stream (`vertex_count * 20` bytes), ready for a vertex buffer.
+    pub vertex_bytes: &'a [u8],
+    /// The raw index stream, ready for an index buffer.
+    pub index_bytes: &'a [u8],
+}
+
+impl<'a> GeometryView<'a> {
+    /// Parses and bounds-checks a geometry segment. Every index is checked against the vertex
+    /// count, so a corrupt segment can never make a renderer read out of bounds.
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, String> {
+        let hsize = std::mem::size_of::<GeometryHeader>();
+        let head = bytes
+            .get(..hsize)
+            .ok_or_else(|| format!("geometry segment of {} bytes is too short", bytes.len()))?;
+        let header: GeometryHeader = bytemuck::pod_read_unaligned(head);
+        if header.magic != GEOMETRY_MAGIC || header.version != GEOMETRY_VERSION {
+            return Err("geometry segment has a bad magic or version".into());
+        }
+        let vlen = header.vertex_count as usize * std::mem::size_of::<Vertex>();
+        let isize = if header.flags & GEOMETRY_U32_INDICES != 0 { 4 } else { 2 };
+        let ilen = header.index_count as usize * isize;
+        let vr = header.vertex_offset as usize..header.vertex_offset as usize + vlen;
+        let ir = header.index_offset as usize..header.index_offset as usize + ilen;
+        let (Some(vertex_bytes), Some(index_bytes)) = (bytes.get(vr), bytes.get(ir)) else {
+            return Err("geometry streams run past the end of the segment".into());
+        };
+        if header.index_count % 3 != 0 {
+            return Err("geometry index count is not a multiple of 3".into());
+        }
+        let view = GeometryView {
+            header,
+            vertex_bytes,
+            index_bytes,
+        };
+        let n = header.vertex_count;
+        if let Some(bad) = view.indices().find(|&i| i >= n) {
+            return Err(format!("geometry index {bad} out of range for {n} vertices"));
+        }
+        Ok(view)
+    }
+
+    /// Whether indices are `u32` (else `u16`).
+    pub fn wide_indices(&self) -> bool {
+        self.header.flags & GEOMETRY_U32_INDICES != 0
+    }
+
+    /// The indices, widened to `u32`.
+    pub fn indices(&self) -> impl Iterator<Item = u32> + '_ {
+        let wide = self.wide_indices();
+        let step = if wide { 4 } else { 2 };
+        self.index_bytes.chunks_exact(step).map(move |c| {
+            if wide {
+                u32::from_le_bytes([c[0], c[1], c[2], c[3]])
+            } else {
+                u16::from_le_bytes([c[0], c[1]]) as u32
+            }
+        })
+    }
+
+    /// Copies the segment back into an owned [`Mesh`].
+    pub fn to_mesh(&self) -> Mesh {
+        Mesh {
+            vertices: self
+                .vertex_bytes
+                .chunks_exact(std::mem::size_of::<Vertex>())
+                .map(bytemuck::pod_read_unaligned)
+                .collect(),
+            indices: self.indices().collect(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad(n: usize) -> Mesh {
+        let vertices = (0..n)
+            .map(|i| Vertex::new([i as f32, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.5, 0.0, 1.0]))
+            .collect();
+        let indices = (0..n as u32 - 2).flat_map(|i| [0, i + 1, i + 2]).collect();
+        Mesh { vertices, indices }
+    }
+
+    #[test]
+    fn geometry_round_trips_with_narrow_and_wide_indices() {
+        for n in [3usize, 7, 70_000] {
+            let m = quad(n);
+            let bytes = encode_geometry(&m);
+            assert_eq!(bytes.len() % 4, 0);
+            let view = GeometryView::parse(&bytes).expect("parse");
+            assert_eq!(view.wide_indices(), n > 65_536);
+            assert_eq!(view.to_mesh(), m);
+        }
+    }
+
+    #[test]
+    fn out_of_range_index_is_rejected() {
+        let mut bytes = encode_geometry(&quad(5));
+        let view = GeometryView::parse(&bytes).unwrap();
+        let last = view.header.index_offset as usize + (view.header.index_count as usize - 1) * 2;
+        bytes[last..last + 2].copy_from_slice(&999u16.to_le_bytes());
+        let err = GeometryView::parse(&bytes).unwrap_err();
+        assert!(err.contains("out of range"), "{err}");
+    }
+
+    #[test]
+    fn short_segment_is_rejected() {
+        let bytes = encode_geometry(&quad(5));
+        for cut in [0, 10, 31, bytes.len() - 3] {
+            assert!(GeometryView::parse(&bytes[..cut]).is_err(), "cut at {cut}");
+        }
+    }
+
+    #[test]
+    fn transform_moves_points_and_keeps_normals_unit() {
+        let m = quad(4);
+        let t = Mat4::from_scale_rotation_translation(
+            Vec3::new(2.0, 1.0, 1.0),
+            glam::Quat::from_rotation_z(std::f32::consts::FRAC_PI_2),
+            Vec3::new(10.0, 0.0, 0.0),
+        );
+        let out = m.transformed(&t);
+        let p = Vec3::from(out.vertices[1].position);
+        assert!((p - Vec3::new(10.0, 2.0, 1.0)).length() < 1e-5, "{p}");
+        let n = out.vertices[0].normal_f32();
+        assert!((n - Vec3::new(-1.0, 0.0, 0.0)).length() < 0.02, "{n}");
+    }
+}

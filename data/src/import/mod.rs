@@ -1,0 +1,122 @@
+//! Importers: Wavefront OBJ+MTL (`tobj`) and glTF 2.0 / GLB (`gltf`), chosen by file extension.
+//!
+//! Both produce a [`Model`]: definitions shared by instances, vertex colours with the material's
+//! base colour already multiplied in, and node tags (`extras`) carried through.
+
+mod gltf;
+mod obj;
+
+use crate::error::{DataError, Result};
+use crate::geometry::{Mesh, Vertex};
+use crate::model::Model;
+use glam::Vec3;
+use std::path::Path;
+
+/// Imports one model file; the format is taken from the extension (`.obj`, `.gltf`, `.glb`).
+pub fn import_file(path: &Path) -> Result<Model> {
+    if !path.exists() {
+        return Err(DataError::import(path, "no such file"));
+    }
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .unwrap_or_default();
+    let mut model = match ext.as_str() {
+        "obj" => obj::import(path)?,
+        "gltf" | "glb" => gltf::import(path)?,
+        other => {
+            return Err(DataError::import(
+                path,
+                format!("unsupported model format '.{other}' (expected .obj, .gltf or .glb)"),
+            ));
+        }
+    };
+    if model.instances.is_empty() {
+        return Err(DataError::import(path, "contains no triangle meshes"));
+    }
+    model.sources.push(path.display().to_string());
+    Ok(model)
+}
+
+/// Builds a mesh from float streams, validating indices and filling in missing normals with
+/// area-weighted vertex normals.
+pub(crate) fn mesh_from_streams(
+    positions: &[[f32; 3]],
+    normals: Option<&[[f32; 3]]>,
+    colors: &[[f32; 4]],
+    indices: Vec<u32>,
+) -> std::result::Result<Mesh, String> {
+    if indices.len() % 3 != 0 {
+        return Err(format!("{} indices is not a whole number of triangles", indices.len()));
+    }
+    if let Some(bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
+        return Err(format!("index {bad} out of range for {} vertices", positions.len()));
+    }
+    if positions.iter().flatten().any(|x| !x.is_finite()) {
+        return Err("a vertex position is not a finite number".into());
+    }
+    let computed;
+    let normals = match normals {
+        Some(n) if n.len() == positions.len() => n,
+        _ => {
+            computed = vertex_normals(positions, &indices);
+            &computed
+        }
+    };
+    let vertices = positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let c = colors.get(i).copied().unwrap_or([1.0; 4]);
+            Vertex::new(*p, normals[i], c)
+        })
+        .collect();
+    Ok(Mesh { vertices, indices })
+}
+
+/// Area-weighted vertex normals for meshes that come without any.
+fn vertex_normals(positions: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]> {
+    let mut acc = vec![Vec3::ZERO; positions.len()];
+    for t in indices.chunks_exact(3) {
+        let [a, b, c] = [t[0], t[1], t[2]].map(|i| Vec3::from(positions[i as usize]));
+        let n = (b - a).cross(c - a);
+        for &i in t {
+            acc[i as usize] += n;
+        }
+    }
+    acc.into_iter()
+        .map(|n| n.try_normalize().unwrap_or(Vec3::Y).into())
+        .collect()
+}
+
+/// Concatenates meshes into one (all primitives of one glTF mesh become one object LOD).
+pub(crate) fn concat(meshes: Vec<Mesh>) -> Mesh {
+    let mut out = Mesh::default();
+    for m in meshes {
+        let base = out.vertices.len() as u32;
+        out.vertices.extend(m.vertices);
+        out.indices.extend(m.indices.into_iter().map(|i| i + base));
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn missing_normals_are_computed_facing_out_of_the_winding() {
+        let p = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]];
+        let m = mesh_from_streams(&p, None, &[], vec![0, 1, 2]).expect("mesh");
+        let n = m.vertices[0].normal_f32();
+        assert!((n - Vec3::Y).length() < 0.02, "{n}");
+    }
+
+    #[test]
+    fn bad_indices_are_errors_not_panics() {
+        let p = [[0.0; 3]; 3];
+        assert!(mesh_from_streams(&p, None, &[], vec![0, 1, 3]).is_err());
+        assert!(mesh_from_streams(&p, None, &[], vec![0, 1]).is_err());
+    }
+}

@@ -1,0 +1,103 @@
+//! The in-memory model that importers produce and the builder consumes: object definitions
+//! with one or more LODs, shared by instances (Funkhouser §3.1, Fig. 3.4–3.5).
+
+use crate::geometry::{Aabb, Mesh};
+use glam::Mat4;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// A surface material. Only the base colour is used today; `texture` leaves room in the format
+/// for a texture segment.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Material {
+    /// Name from the source file.
+    pub name: String,
+    /// Linear RGBA base colour, multiplied with the vertex colour.
+    pub base_color: [f32; 4],
+    /// Segment id of a texture (reserved; always `None` for now).
+    pub texture: Option<u32>,
+}
+
+impl Default for Material {
+    fn default() -> Self {
+        Material {
+            name: "default".into(),
+            base_color: [1.0; 4],
+            texture: None,
+        }
+    }
+}
+
+/// An object definition: its LODs, finest first, in the definition's own coordinates.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ObjectDef {
+    /// Name from the source file (mesh or object name).
+    pub name: String,
+    /// LOD meshes, finest first. Importers give one (or the source's own LODs); the builder adds
+    /// coarser ones.
+    pub lods: Vec<Mesh>,
+    /// Default material index.
+    pub material: u32,
+}
+
+/// A placed copy of a definition.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Instance {
+    /// Node name from the source file.
+    pub name: String,
+    /// Index into [`Model::defs`].
+    pub def: u32,
+    /// Object-to-world transform.
+    pub transform: Mat4,
+    /// Material index (overrides the definition's when it differs).
+    pub material: u32,
+    /// Whether this is a structural occluder (wall, floor, ceiling), from the source's `extras`.
+    pub occluder: bool,
+    /// Every other scalar tag from the source's `extras` (kind, room, storey, ...).
+    pub tags: BTreeMap<String, String>,
+}
+
+/// A whole imported model.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Model {
+    /// Materials; index 0 always exists.
+    pub materials: Vec<Material>,
+    /// Object definitions.
+    pub defs: Vec<ObjectDef>,
+    /// Instances of the definitions.
+    pub instances: Vec<Instance>,
+    /// The files it came from.
+    pub sources: Vec<String>,
+}
+
+impl Model {
+    /// Appends another model, renumbering its materials and definitions.
+    pub fn merge(&mut self, other: Model) {
+        let mat_base = self.materials.len() as u32;
+        let def_base = self.defs.len() as u32;
+        self.materials.extend(other.materials);
+        self.defs.extend(other.defs.into_iter().map(|mut d| {
+            d.material += mat_base;
+            d
+        }));
+        self.instances
+            .extend(other.instances.into_iter().map(|mut i| {
+                i.def += def_base;
+                i.material += mat_base;
+                i
+            }));
+        self.sources.extend(other.sources);
+    }
+
+    /// World-space bounds of every instance's finest LOD.
+    pub fn bounds(&self) -> Aabb {
+        self.instances.iter().fold(Aabb::EMPTY, |acc, inst| {
+            let local = self.defs[inst.def as usize]
+                .lods
+                .first()
+                .map(Mesh::bounds)
+                .unwrap_or(Aabb::EMPTY);
+            acc.union(&local.transformed(&inst.transform))
+        })
+    }
+}

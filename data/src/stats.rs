@@ -1,0 +1,149 @@
+//! Database statistics for `portico inspect`, including Funkhouser's Table 3.1 (multi-resolution
+//! modelling statistics: per LOD level, how many object instances have it and how many polygons
+//! they use — min, mean and max per object).
+
+use crate::format::reader::Database;
+use crate::format::SegmentKind;
+use serde::Serialize;
+
+/// One row of the Table 3.1-style LOD table.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LodRow {
+    /// "1 (lowest)", "2", ..., or the summary rows "lowest", "highest", "all".
+    pub level: String,
+    /// Object instances that have this level.
+    pub objects: u64,
+    /// Polygons (triangles) over those instances.
+    pub polygons: u64,
+    /// Fewest polygons of one instance at this level.
+    pub min_per_object: u64,
+    /// Mean polygons per instance at this level.
+    pub mean_per_object: f64,
+    /// Most polygons of one instance at this level.
+    pub max_per_object: u64,
+}
+
+/// Everything `portico inspect --json` prints.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DbStats {
+    /// Model name.
+    pub name: String,
+    /// Format version.
+    pub format_version: u32,
+    /// Whether instances carry their own geometry.
+    pub flattened: bool,
+    /// Object definitions.
+    pub objects: u64,
+    /// Object instances.
+    pub instances: u64,
+    /// Instances tagged as structural occluders.
+    pub occluders: u64,
+    /// Materials.
+    pub materials: u64,
+    /// Triangles over all instances at their highest LOD.
+    pub triangles_highest: u64,
+    /// Triangles over all instances and all their LODs.
+    pub triangles_all_lods: u64,
+    /// Table 3.1: levels from the lowest up, then lowest / highest / all.
+    pub lod_table: Vec<LodRow>,
+    /// Number of segments.
+    pub segments: u64,
+    /// Bytes of geometry segments.
+    pub geometry_bytes: u64,
+    /// Total file size.
+    pub file_bytes: u64,
+    /// World bounds (min, max).
+    pub bounds: [[f32; 3]; 2],
+}
+
+/// Computes the statistics of an open database (header only; no segment is read).
+pub fn stats(db: &Database) -> DbStats {
+    let h = db.header();
+    let per_instance: Vec<Vec<u64>> = h
+        .instances
+        .iter()
+        .map(|i| h.lods_of(i).iter().rev().map(|l| l.triangles as u64).collect())
+        .collect();
+    let levels = per_instance.iter().map(Vec::len).max().unwrap_or(0);
+    let mut lod_table: Vec<LodRow> = (0..levels)
+        .map(|k| {
+            let label = if k == 0 { "1 (lowest)".to_string() } else { (k + 1).to_string() };
+            row(label, per_instance.iter().filter_map(|l| l.get(k).copied()))
+        })
+        .collect();
+    lod_table.push(row("lowest".into(), per_instance.iter().filter_map(|l| l.first().copied())));
+    lod_table.push(row("highest".into(), per_instance.iter().filter_map(|l| l.last().copied())));
+    lod_table.push(row("all".into(), per_instance.iter().map(|l| l.iter().sum())));
+    let geometry_bytes = db
+        .segments()
+        .iter()
+        .filter(|s| s.kind == SegmentKind::Geometry as u16)
+        .map(|s| s.length)
+        .sum();
+    DbStats {
+        name: h.name.clone(),
+        format_version: db.prologue().version,
+        flattened: h.flattened,
+        objects: h.objects.len() as u64,
+        instances: h.instances.len() as u64,
+        occluders: h.instances.iter().filter(|i| i.occluder).count() as u64,
+        materials: h.materials.len() as u64,
+        triangles_highest: lod_table[lod_table.len() - 2].polygons,
+        triangles_all_lods: lod_table[lod_table.len() - 1].polygons,
+        lod_table,
+        segments: db.segments().len() as u64,
+        geometry_bytes,
+        file_bytes: db.file_len(),
+        bounds: [h.bounds.min, h.bounds.max],
+    }
+}
+
+fn row(level: String, counts: impl Iterator<Item = u64>) -> LodRow {
+    let (mut n, mut sum, mut min, mut max) = (0u64, 0u64, u64::MAX, 0u64);
+    for c in counts {
+        n += 1;
+        sum += c;
+        min = min.min(c);
+        max = max.max(c);
+    }
+    LodRow {
+        level,
+        objects: n,
+        polygons: sum,
+        min_per_object: if n == 0 { 0 } else { min },
+        mean_per_object: if n == 0 { 0.0 } else { sum as f64 / n as f64 },
+        max_per_object: max,
+    }
+}
+
+impl DbStats {
+    /// A human-readable summary with the LOD table laid out like Funkhouser's Table 3.1.
+    pub fn to_text(&self) -> String {
+        let mut s = format!(
+            "{} (format v{}{})\n  objects {}  instances {}  occluders {}  materials {}\n  triangles: highest LOD {}  all LODs {}\n  segments {}  geometry {:.1} MB  file {:.1} MB\n\n",
+            self.name,
+            self.format_version,
+            if self.flattened { ", flattened" } else { "" },
+            self.objects,
+            self.instances,
+            self.occluders,
+            self.materials,
+            self.triangles_highest,
+            self.triangles_all_lods,
+            self.segments,
+            self.geometry_bytes as f64 / 1e6,
+            self.file_bytes as f64 / 1e6,
+        );
+        s.push_str(&format!(
+            "  {:<12} {:>10} {:>12} {:>8} {:>10} {:>8}\n",
+            "LOD", "objects", "polygons", "min", "mean", "max"
+        ));
+        for r in &self.lod_table {
+            s.push_str(&format!(
+                "  {:<12} {:>10} {:>12} {:>8} {:>10.2} {:>8}\n",
+                r.level, r.objects, r.polygons, r.min_per_object, r.mean_per_object, r.max_per_object
+            ));
+        }
+        s
+    }
+}
