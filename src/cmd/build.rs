@@ -1,0 +1,62 @@
+//! `portico build MODEL... -o FILE.portico [--flatten] [--threads N]`
+
+use crate::progress::Bars;
+use anyhow::{Context, Result};
+use portico_data::build::{BuildOptions, build};
+use portico_data::import::import_file;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Arguments of `portico build`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Model files: .obj (with .mtl), .gltf or .glb.
+    #[arg(required = true)]
+    models: Vec<PathBuf>,
+    /// Output display database.
+    #[arg(short, long)]
+    output: PathBuf,
+    /// Store every instance's geometry separately with baked lighting (large: the out-of-core case).
+    #[arg(long)]
+    flatten: bool,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Model name stored in the database (default: the first model's file name).
+    #[arg(long)]
+    name: Option<String>,
+}
+
+/// Imports the models, builds, and prints a one-line summary.
+pub fn run(a: Args) -> Result<()> {
+    if let Some(n) = a.threads {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global()
+            .context("setting up worker threads")?;
+    }
+    let t0 = Instant::now();
+    let mut model = portico_data::model::Model::default();
+    for path in &a.models {
+        model.merge(import_file(path)?);
+    }
+    let import_time = t0.elapsed();
+    let bars = Bars::new();
+    let opts = BuildOptions {
+        flatten: a.flatten,
+        name: a.name,
+    };
+    let report = build(model, &a.output, &opts, &bars)?;
+    bars.finish();
+    eprintln!(
+        "wrote {} ({:.1} MB, {} segments) in {:.2} s (import {:.2} s, LODs {:.2} s, write {:.2} s)",
+        report.written.path.display(),
+        report.written.file_bytes as f64 / 1e6,
+        report.written.segments,
+        t0.elapsed().as_secs_f64(),
+        import_time.as_secs_f64(),
+        report.lod_time.as_secs_f64(),
+        report.write_time.as_secs_f64(),
+    );
+    Ok(())
+}

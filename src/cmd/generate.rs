@@ -1,0 +1,76 @@
+//! `portico generate --preset tiny|small|soda|mega [--seed N] [--floors F] -o building.glb`
+
+use crate::progress::Bars;
+use anyhow::{Context, Result};
+use portico_generator::{Params, Preset, generate};
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::Instant;
+
+/// Arguments of `portico generate`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Size of the building: tiny (tests), small (demo), soda (Soda Hall scale), mega (10x soda).
+    #[arg(long, default_value = "small")]
+    preset: Preset,
+    /// Random seed: the same seed gives the same bytes.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Number of storeys (overrides the preset's).
+    #[arg(long)]
+    floors: Option<u32>,
+    /// Output GLB file.
+    #[arg(short, long)]
+    output: PathBuf,
+}
+
+/// Generates the building and writes it atomically.
+pub fn run(a: Args) -> Result<()> {
+    let t0 = Instant::now();
+    let bars = Bars::new();
+    let mut started = false;
+    let params = Params {
+        preset: a.preset,
+        seed: a.seed,
+        floors: a.floors,
+    };
+    let building = generate(&params, &mut |p| {
+        if !started {
+            bars.start("storeys", p.total);
+            started = true;
+        }
+        bars.inc(1);
+    })
+    .with_context(|| format!("generating the {} preset", a.preset))?;
+    bars.finish();
+    write_atomically(&a.output, &building.glb)?;
+    let s = &building.stats;
+    eprintln!(
+        "wrote {} ({:.1} MB) in {:.2} s: {} storeys, {} rooms, {} instances of {} definitions, {} triangles at the highest LOD",
+        a.output.display(),
+        building.glb.len() as f64 / 1e6,
+        t0.elapsed().as_secs_f64(),
+        s.storeys,
+        s.rooms,
+        s.instances,
+        s.definitions,
+        s.triangles_highest,
+    );
+    Ok(())
+}
+
+/// Writes through a temporary file in the same directory and renames it into place.
+fn write_atomically(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(std::path::Path::new("."));
+    let mut tmp = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("{}: cannot create a file there", dir.display()))?;
+    tmp.write_all(bytes)
+        .and_then(|_| tmp.as_file().sync_all())
+        .with_context(|| format!("{}: write failed", path.display()))?;
+    tmp.persist(path)
+        .with_context(|| format!("{}: cannot rename into place", path.display()))?;
+    Ok(())
+}
