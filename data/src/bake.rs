@@ -42,7 +42,11 @@ pub fn bake(mesh: &mut Mesh) {
     for v in &mut mesh.vertices {
         let l = irradiance(Vec3::from(v.position), v.normal_f32().normalize_or_zero());
         let c = v.color_f32();
-        *v = Vertex::new(v.position, v.normal_f32().into(), [c[0] * l, c[1] * l, c[2] * l, c[3]]);
+        *v = Vertex::new(
+            v.position,
+            v.normal_f32().into(),
+            [c[0] * l, c[1] * l, c[2] * l, c[3]],
+        );
     }
 }
 

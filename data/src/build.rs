@@ -53,9 +53,19 @@ pub struct BuildReport {
 }
 
 /// Builds a display database at `out` from an imported model.
-pub fn build(model: Model, out: &Path, opts: &BuildOptions, obs: &dyn Observer) -> Result<BuildReport> {
+pub fn build(
+    model: Model,
+    out: &Path,
+    opts: &BuildOptions,
+    obs: &dyn Observer,
+) -> Result<BuildReport> {
     let t0 = Instant::now();
-    let Model { materials, defs, instances, sources } = model;
+    let Model {
+        materials,
+        defs,
+        instances,
+        sources,
+    } = model;
     obs.stage("LODs", defs.len() as u64);
     let lods: Vec<(String, u32, Vec<LodMesh>)> = defs
         .into_par_iter()
@@ -180,9 +190,17 @@ fn write_lod(w: &mut DbWriter, l: &LodMesh, bytes: Vec<u8>, error: f32) -> Resul
 }
 
 /// The header record of an instance; flattened instances get their own LODs and identity.
-fn instance_record(inst: &Instance, levels: &[LodMesh], own: Option<Vec<LodRecord>>) -> InstanceRecord {
+fn instance_record(
+    inst: &Instance,
+    levels: &[LodMesh],
+    own: Option<Vec<LodRecord>>,
+) -> InstanceRecord {
     let local = levels.first().map_or(Aabb::EMPTY, |l| l.mesh.bounds());
-    let transform = if own.is_some() { Mat4::IDENTITY } else { inst.transform };
+    let transform = if own.is_some() {
+        Mat4::IDENTITY
+    } else {
+        inst.transform
+    };
     InstanceRecord {
         name: inst.name.clone(),
         object: inst.def,
@@ -190,7 +208,11 @@ fn instance_record(inst: &Instance, levels: &[LodMesh], own: Option<Vec<LodRecor
         material: inst.material,
         bounds: local.transformed(&inst.transform),
         occluder: inst.occluder,
-        tags: inst.tags.iter().map(|(k, v)| (k.clone(), v.clone())).collect(),
+        tags: inst
+            .tags
+            .iter()
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect(),
         lods: own,
     }
 }

@@ -142,7 +142,7 @@ impl Mesh {
 
     /// Checks the invariants: whole triangles, indices in range.
     pub fn validate(&self) -> Result<(), String> {
-        if self.indices.len() % 3 != 0 {
+        if !self.indices.len().is_multiple_of(3) {
             return Err(format!(
                 "index count {} is not a multiple of 3",
                 self.indices.len()
@@ -150,9 +150,7 @@ impl Mesh {
         }
         let n = self.vertices.len() as u32;
         if let Some(bad) = self.indices.iter().find(|&&i| i >= n) {
-            return Err(format!(
-                "index {bad} out of range for {n} vertices"
-            ));
+            return Err(format!("index {bad} out of range for {n} vertices"));
         }
         Ok(())
     }
@@ -283,14 +281,18 @@ impl<'a> GeometryView<'a> {
             return Err("geometry segment has a bad magic or version".into());
         }
         let vlen = header.vertex_count as usize * std::mem::size_of::<Vertex>();
-        let isize = if header.flags & GEOMETRY_U32_INDICES != 0 { 4 } else { 2 };
+        let isize = if header.flags & GEOMETRY_U32_INDICES != 0 {
+            4
+        } else {
+            2
+        };
         let ilen = header.index_count as usize * isize;
         let vr = header.vertex_offset as usize..header.vertex_offset as usize + vlen;
         let ir = header.index_offset as usize..header.index_offset as usize + ilen;
         let (Some(vertex_bytes), Some(index_bytes)) = (bytes.get(vr), bytes.get(ir)) else {
             return Err("geometry streams run past the end of the segment".into());
         };
-        if header.index_count % 3 != 0 {
+        if !header.index_count.is_multiple_of(3) {
             return Err("geometry index count is not a multiple of 3".into());
         }
         let view = GeometryView {
@@ -300,7 +302,9 @@ impl<'a> GeometryView<'a> {
         };
         let n = header.vertex_count;
         if let Some(bad) = view.indices().find(|&i| i >= n) {
-            return Err(format!("geometry index {bad} out of range for {n} vertices"));
+            return Err(format!(
+                "geometry index {bad} out of range for {n} vertices"
+            ));
         }
         Ok(view)
     }

@@ -135,9 +135,17 @@ pub fn box_mesh(b: &Aabb, color: [f32; 4]) -> Mesh {
                 Vertex::new(p.into(), n.into(), color)
             };
             let base = mesh.vertices.len() as u32;
-            mesh.vertices
-                .extend([corner(0.0, 0.0), corner(1.0, 0.0), corner(1.0, 1.0), corner(0.0, 1.0)]);
-            let quad = if side > 0.5 { [0, 1, 2, 0, 2, 3] } else { [0, 2, 1, 0, 3, 2] };
+            mesh.vertices.extend([
+                corner(0.0, 0.0),
+                corner(1.0, 0.0),
+                corner(1.0, 1.0),
+                corner(0.0, 1.0),
+            ]);
+            let quad = if side > 0.5 {
+                [0, 1, 2, 0, 2, 3]
+            } else {
+                [0, 2, 1, 0, 3, 2]
+            };
             mesh.indices.extend(quad.map(|i| base + i));
         }
     }
@@ -219,7 +227,8 @@ mod tests {
             for j in 0..=2 * n {
                 let ph = std::f32::consts::PI * j as f32 / n as f32;
                 let p = Vec3::new(th.sin() * ph.cos(), th.cos(), th.sin() * ph.sin());
-                m.vertices.push(Vertex::new(p.into(), p.into(), [0.2, 0.4, 0.8, 1.0]));
+                m.vertices
+                    .push(Vertex::new(p.into(), p.into(), [0.2, 0.4, 0.8, 1.0]));
             }
         }
         let w = 2 * n + 1;
@@ -283,6 +292,8 @@ mod tests {
         let t = [Vec3::ZERO, Vec3::X, Vec3::Y];
         assert!((point_triangle_distance(Vec3::new(0.2, 0.2, 1.0), &t) - 1.0).abs() < 1e-6);
         assert!((point_triangle_distance(Vec3::new(-1.0, 0.0, 0.0), &t) - 1.0).abs() < 1e-6);
-        assert!((point_triangle_distance(Vec3::new(1.0, 1.0, 0.0), &t) - 0.5f32.sqrt()).abs() < 1e-6);
+        assert!(
+            (point_triangle_distance(Vec3::new(1.0, 1.0, 0.0), &t) - 0.5f32.sqrt()).abs() < 1e-6
+        );
     }
 }

@@ -2,8 +2,8 @@
 //! modelling statistics: per LOD level, how many object instances have it and how many polygons
 //! they use — min, mean and max per object).
 
-use crate::format::reader::Database;
 use crate::format::SegmentKind;
+use crate::format::reader::Database;
 use serde::Serialize;
 
 /// One row of the Table 3.1-style LOD table.
@@ -62,18 +62,37 @@ pub fn stats(db: &Database) -> DbStats {
     let per_instance: Vec<Vec<u64>> = h
         .instances
         .iter()
-        .map(|i| h.lods_of(i).iter().rev().map(|l| l.triangles as u64).collect())
+        .map(|i| {
+            h.lods_of(i)
+                .iter()
+                .rev()
+                .map(|l| l.triangles as u64)
+                .collect()
+        })
         .collect();
     let levels = per_instance.iter().map(Vec::len).max().unwrap_or(0);
     let mut lod_table: Vec<LodRow> = (0..levels)
         .map(|k| {
-            let label = if k == 0 { "1 (lowest)".to_string() } else { (k + 1).to_string() };
+            let label = if k == 0 {
+                "1 (lowest)".to_string()
+            } else {
+                (k + 1).to_string()
+            };
             row(label, per_instance.iter().filter_map(|l| l.get(k).copied()))
         })
         .collect();
-    lod_table.push(row("lowest".into(), per_instance.iter().filter_map(|l| l.first().copied())));
-    lod_table.push(row("highest".into(), per_instance.iter().filter_map(|l| l.last().copied())));
-    lod_table.push(row("all".into(), per_instance.iter().map(|l| l.iter().sum())));
+    lod_table.push(row(
+        "lowest".into(),
+        per_instance.iter().filter_map(|l| l.first().copied()),
+    ));
+    lod_table.push(row(
+        "highest".into(),
+        per_instance.iter().filter_map(|l| l.last().copied()),
+    ));
+    lod_table.push(row(
+        "all".into(),
+        per_instance.iter().map(|l| l.iter().sum()),
+    ));
     let geometry_bytes = db
         .segments()
         .iter()
@@ -141,7 +160,12 @@ impl DbStats {
         for r in &self.lod_table {
             s.push_str(&format!(
                 "  {:<12} {:>10} {:>12} {:>8} {:>10.2} {:>8}\n",
-                r.level, r.objects, r.polygons, r.min_per_object, r.mean_per_object, r.max_per_object
+                r.level,
+                r.objects,
+                r.polygons,
+                r.min_per_object,
+                r.mean_per_object,
+                r.max_per_object
             ));
         }
         s

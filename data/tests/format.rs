@@ -34,7 +34,13 @@ fn sphere(n: u32, color: [f32; 4]) -> Mesh {
 
 /// Two definitions (a sphere, a wall box), five instances.
 fn model() -> Model {
-    let wall = box_mesh(&Aabb { min: [0.0, 0.0, 0.0], max: [4.0, 3.0, 0.2] }, [0.9, 0.9, 0.8, 1.0]);
+    let wall = box_mesh(
+        &Aabb {
+            min: [0.0, 0.0, 0.0],
+            max: [4.0, 3.0, 0.2],
+        },
+        [0.9, 0.9, 0.8, 1.0],
+    );
     let mut instances: Vec<Instance> = (0..4)
         .map(|i| Instance {
             name: format!("ball{i}"),
@@ -56,11 +62,23 @@ fn model() -> Model {
     Model {
         materials: vec![
             Material::default(),
-            Material { name: "red".into(), base_color: [1.0, 0.0, 0.0, 1.0], texture: None },
+            Material {
+                name: "red".into(),
+                base_color: [1.0, 0.0, 0.0, 1.0],
+                texture: None,
+            },
         ],
         defs: vec![
-            ObjectDef { name: "ball".into(), lods: vec![sphere(24, [1.0, 0.0, 0.0, 1.0])], material: 1 },
-            ObjectDef { name: "wall".into(), lods: vec![wall], material: 0 },
+            ObjectDef {
+                name: "ball".into(),
+                lods: vec![sphere(24, [1.0, 0.0, 0.0, 1.0])],
+                material: 1,
+            },
+            ObjectDef {
+                name: "wall".into(),
+                lods: vec![wall],
+                material: 0,
+            },
         ],
         instances,
         sources: vec!["test.glb".into()],
@@ -68,8 +86,21 @@ fn model() -> Model {
 }
 
 fn built(dir: &Path, flatten: bool) -> std::path::PathBuf {
-    let path = dir.join(if flatten { "flat.portico" } else { "shared.portico" });
-    build(model(), &path, &BuildOptions { flatten, name: None }, &Quiet).expect("build");
+    let path = dir.join(if flatten {
+        "flat.portico"
+    } else {
+        "shared.portico"
+    });
+    build(
+        model(),
+        &path,
+        &BuildOptions {
+            flatten,
+            name: None,
+        },
+        &Quiet,
+    )
+    .expect("build");
     path
 }
 
@@ -82,7 +113,11 @@ fn round_trip_preserves_instancing_lods_and_every_segment() {
     let h = db.header();
     assert_eq!(h.objects.len(), 2);
     assert_eq!(h.instances.len(), 5);
-    assert!(h.instances[..4].iter().all(|i| i.object == 0 && i.lods.is_none()));
+    assert!(
+        h.instances[..4]
+            .iter()
+            .all(|i| i.object == 0 && i.lods.is_none())
+    );
     assert!(h.instances[4].occluder && !h.instances[0].occluder);
     assert_eq!(h.instances[0].tag("kind"), Some("furniture"));
     let ball = &h.objects[0];
@@ -111,7 +146,11 @@ fn flatten_gives_each_instance_its_own_baked_world_geometry() {
     flat.verify_all().unwrap();
     let h = flat.header();
     assert!(h.flattened);
-    let own: Vec<_> = h.instances.iter().map(|i| i.lods.clone().expect("own LODs")).collect();
+    let own: Vec<_> = h
+        .instances
+        .iter()
+        .map(|i| i.lods.clone().expect("own LODs"))
+        .collect();
     assert_ne!(own[0][0].segment, own[1][0].segment);
     assert!(flat.file_len() > shared.file_len());
     // Instance 2 sits at x = 6: its flattened vertices are in world space.
@@ -120,9 +159,14 @@ fn flatten_gives_each_instance_its_own_baked_world_geometry() {
     let c = mesh.bounds().center();
     assert!((c - Vec3::new(6.0, 1.0, 2.0)).length() < 1e-3, "{c}");
     // Baked lighting makes two copies of one definition differ in colour.
-    let other = GeometryView::parse(&flat.geometry(&own[0][0]).unwrap()).unwrap().to_mesh();
+    let other = GeometryView::parse(&flat.geometry(&own[0][0]).unwrap())
+        .unwrap()
+        .to_mesh();
     let colors = |m: &Mesh| m.vertices.iter().map(|v| v.color).collect::<Vec<_>>();
-    assert!(colors(&mesh) != colors(&other), "baked colours of two instances are identical");
+    assert!(
+        colors(&mesh) != colors(&other),
+        "baked colours of two instances are identical"
+    );
     assert_eq!(h.bounds, shared.header().bounds);
 }
 
@@ -145,7 +189,10 @@ fn truncated_corrupt_and_foreign_files_are_clear_errors() {
 
     let mut v = good.clone();
     v[8..12].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());
-    assert!(matches!(open_bytes(v).unwrap_err(), DataError::Version { .. }));
+    assert!(matches!(
+        open_bytes(v).unwrap_err(),
+        DataError::Version { .. }
+    ));
 
     // A flipped bit in the prologue, the header, or the index.
     for at in [20, good.len() - 10] {
@@ -155,7 +202,9 @@ fn truncated_corrupt_and_foreign_files_are_clear_errors() {
         assert!(matches!(e, DataError::Corrupt { .. }), "flip at {at}: {e}");
     }
     // A flipped bit in a segment payload is caught when the segment is read.
-    let first = Database::from_bytes(Path::new("x"), good.clone().into()).unwrap().segments()[0];
+    let first = Database::from_bytes(Path::new("x"), good.clone().into())
+        .unwrap()
+        .segments()[0];
     let mut v = good.clone();
     v[first.offset as usize + 40] ^= 1;
     let db = open_bytes(v).expect("header still fine");
@@ -195,13 +244,12 @@ proptest! {
         let pos = pos % good.len();
         let mut v = good.clone();
         v[pos] ^= 1 << bit;
-        if let Ok(db) = open_bytes(v) {
-            if db.verify_all().is_ok() {
+        if let Ok(db) = open_bytes(v)
+            && db.verify_all().is_ok() {
                 // Only padding bytes are unchecked; everything else is covered by a checksum.
                 let covered = db.segments().iter().any(|s| (s.offset..s.offset + s.length).contains(&(pos as u64)));
                 prop_assert!(!covered && pos >= PROLOGUE_SIZE);
             }
-        }
     }
 
     /// Any prefix of the file is rejected without panicking.

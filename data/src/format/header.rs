@@ -106,7 +106,11 @@ impl Header {
                     .get(l.segment as usize)
                     .ok_or_else(|| format!("{} refers to missing segment {}", what(), l.segment))?;
                 if SegmentKind::from_u16(seg.kind) != Some(SegmentKind::Geometry) {
-                    return Err(format!("{} refers to non-geometry segment {}", what(), l.segment));
+                    return Err(format!(
+                        "{} refers to non-geometry segment {}",
+                        what(),
+                        l.segment
+                    ));
                 }
             }
             Ok(())
@@ -117,15 +121,26 @@ impl Header {
                 check_lods(&o.lods, &|| format!("object {i}"))?;
             }
             if o.material as usize >= self.materials.len() {
-                return Err(format!("object {i} has material {} of {}", o.material, self.materials.len()));
+                return Err(format!(
+                    "object {i} has material {} of {}",
+                    o.material,
+                    self.materials.len()
+                ));
             }
         }
         for (i, inst) in self.instances.iter().enumerate() {
             if inst.object as usize >= self.objects.len() {
-                return Err(format!("instance {i} refers to missing object {}", inst.object));
+                return Err(format!(
+                    "instance {i} refers to missing object {}",
+                    inst.object
+                ));
             }
             if inst.material as usize >= self.materials.len() {
-                return Err(format!("instance {i} has material {} of {}", inst.material, self.materials.len()));
+                return Err(format!(
+                    "instance {i} has material {} of {}",
+                    inst.material,
+                    self.materials.len()
+                ));
             }
             if inst.transform.iter().any(|x| !x.is_finite()) {
                 return Err(format!("instance {i} has a non-finite transform"));

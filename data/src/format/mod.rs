@@ -140,7 +140,11 @@ pub fn checksum(bytes: &[u8]) -> u64 {
 
 /// Alignment for a segment of `len` bytes.
 pub fn alignment_for(len: u64) -> u64 {
-    if len >= PAGE_ALIGN { PAGE_ALIGN } else { SEGMENT_ALIGN }
+    if len >= PAGE_ALIGN {
+        PAGE_ALIGN
+    } else {
+        SEGMENT_ALIGN
+    }
 }
 
 /// The bincode configuration of the header (standard, little-endian varints).

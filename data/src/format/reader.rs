@@ -9,8 +9,8 @@
 //! rename a new file over it instead (see `writer`).
 
 use super::{
-    FORMAT_VERSION, Header, LodRecord, MAGIC, PROLOGUE_SIZE, Prologue, SEGMENT_ALIGN,
-    SegmentEntry, SegmentKind, bincode_config, checksum, segment_flags,
+    FORMAT_VERSION, Header, LodRecord, MAGIC, PROLOGUE_SIZE, Prologue, SEGMENT_ALIGN, SegmentEntry,
+    SegmentKind, bincode_config, checksum, segment_flags,
 };
 use crate::error::{DataError, Result};
 use crate::geometry::GeometryView;
@@ -118,9 +118,8 @@ impl Database {
     /// agree with its LOD record; borrow its streams with [`GeometryView::parse`].
     pub fn geometry(&self, lod: &LodRecord) -> Result<Bytes> {
         let bytes = self.segment(lod.segment)?;
-        let view = GeometryView::parse(&bytes).map_err(|e| {
-            DataError::corrupt(&self.path, format!("segment {}: {e}", lod.segment))
-        })?;
+        let view = GeometryView::parse(&bytes)
+            .map_err(|e| DataError::corrupt(&self.path, format!("segment {}: {e}", lod.segment)))?;
         if view.header.vertex_count != lod.vertices || view.header.index_count != lod.triangles * 3
         {
             return Err(DataError::corrupt(

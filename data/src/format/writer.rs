@@ -118,7 +118,9 @@ impl DbWriter {
         prologue.prologue_checksum = prologue.compute_checksum();
         let io = |e| DataError::io(&self.temp, e);
         self.out.seek(SeekFrom::Start(0)).map_err(io)?;
-        self.out.write_all(bytemuck::bytes_of(&prologue)).map_err(io)?;
+        self.out
+            .write_all(bytemuck::bytes_of(&prologue))
+            .map_err(io)?;
         let file = self.out.into_inner().map_err(|e| io(e.into_error()))?;
         file.sync_all().map_err(io)?;
         drop(file);
@@ -150,9 +152,11 @@ impl DbWriter {
 
 /// Makes the rename durable (best effort: not every filesystem supports syncing a directory).
 fn sync_parent_dir(path: &Path) {
-    if let Some(dir) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        if let Ok(d) = File::open(dir) {
-            let _ = d.sync_all();
-        }
+    if let Some(d) = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .and_then(|dir| File::open(dir).ok())
+    {
+        let _ = d.sync_all();
     }
 }

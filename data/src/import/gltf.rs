@@ -91,7 +91,9 @@ impl Importer<'_> {
         let (occluder, tags) = extras(node)?;
         let material = self.model.defs[def as usize].material;
         self.model.instances.push(Instance {
-            name: node.name().map_or_else(|| format!("node{}", node.index()), str::to_string),
+            name: node
+                .name()
+                .map_or_else(|| format!("node{}", node.index()), str::to_string),
             def,
             transform: world,
             material,
@@ -115,7 +117,9 @@ impl Importer<'_> {
                 let n = id
                     .as_u64()
                     .and_then(|i| self.doc.nodes().nth(i as usize))
-                    .ok_or_else(|| format!("node {}: MSFT_lod id {id} is not a node", node.index()))?;
+                    .ok_or_else(|| {
+                        format!("node {}: MSFT_lod id {id} is not a node", node.index())
+                    })?;
                 n.mesh()
                     .map(|m| m.index())
                     .ok_or_else(|| format!("node {}: MSFT_lod node {id} has no mesh", node.index()))
@@ -139,8 +143,14 @@ impl Importer<'_> {
             .next()
             .and_then(|p| p.material().index())
             .map_or(0, |i| i as u32 + 1);
-        let name = mesh.name().map_or_else(|| format!("mesh{}", mesh.index()), str::to_string);
-        self.model.defs.push(ObjectDef { name, lods: levels, material });
+        let name = mesh
+            .name()
+            .map_or_else(|| format!("mesh{}", mesh.index()), str::to_string);
+        self.model.defs.push(ObjectDef {
+            name,
+            lods: levels,
+            material,
+        });
         Ok(self.model.defs.len() as u32 - 1)
     }
 
@@ -149,7 +159,10 @@ impl Importer<'_> {
         let mut parts = Vec::new();
         for prim in mesh.primitives() {
             let at = || format!("mesh {} primitive {}", mesh.index(), prim.index());
-            let Some(part) = self.primitive(&prim).map_err(|e| format!("{}: {e}", at()))? else {
+            let Some(part) = self
+                .primitive(&prim)
+                .map_err(|e| format!("{}: {e}", at()))?
+            else {
                 continue;
             };
             parts.push(part);

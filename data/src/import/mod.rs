@@ -41,17 +41,23 @@ pub fn import_file(path: &Path) -> Result<Model> {
 
 /// Builds a mesh from float streams, validating indices and filling in missing normals with
 /// area-weighted vertex normals.
-pub(crate) fn mesh_from_streams(
+pub fn mesh_from_streams(
     positions: &[[f32; 3]],
     normals: Option<&[[f32; 3]]>,
     colors: &[[f32; 4]],
     indices: Vec<u32>,
 ) -> std::result::Result<Mesh, String> {
-    if indices.len() % 3 != 0 {
-        return Err(format!("{} indices is not a whole number of triangles", indices.len()));
+    if !indices.len().is_multiple_of(3) {
+        return Err(format!(
+            "{} indices is not a whole number of triangles",
+            indices.len()
+        ));
     }
     if let Some(bad) = indices.iter().find(|&&i| i as usize >= positions.len()) {
-        return Err(format!("index {bad} out of range for {} vertices", positions.len()));
+        return Err(format!(
+            "index {bad} out of range for {} vertices",
+            positions.len()
+        ));
     }
     if positions.iter().flatten().any(|x| !x.is_finite()) {
         return Err("a vertex position is not a finite number".into());
@@ -91,7 +97,7 @@ fn vertex_normals(positions: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]> {
 }
 
 /// Concatenates meshes into one (all primitives of one glTF mesh become one object LOD).
-pub(crate) fn concat(meshes: Vec<Mesh>) -> Mesh {
+pub fn concat(meshes: Vec<Mesh>) -> Mesh {
     let mut out = Mesh::default();
     for m in meshes {
         let base = out.vertices.len() as u32;

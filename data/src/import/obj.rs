@@ -15,10 +15,13 @@ pub fn import(path: &Path) -> Result<Model> {
         ignore_points: true,
         ignore_lines: true,
     };
-    let (models, mtl) = tobj::load_obj(path, &opts)
-        .map_err(|e| DataError::import(path, format!("OBJ: {e}")))?;
+    let (models, mtl) =
+        tobj::load_obj(path, &opts).map_err(|e| DataError::import(path, format!("OBJ: {e}")))?;
     let mtl = mtl.unwrap_or_else(|e| {
-        tracing::warn!("{}: materials not loaded ({e}); using white", path.display());
+        tracing::warn!(
+            "{}: materials not loaded ({e}); using white",
+            path.display()
+        );
         Vec::new()
     });
     let mut model = Model {
@@ -45,8 +48,11 @@ pub fn import(path: &Path) -> Result<Model> {
             .chunks_exact(3)
             .map(|c| [c[0], c[1], c[2]])
             .collect();
-        let normals: Vec<[f32; 3]> =
-            mesh.normals.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+        let normals: Vec<[f32; 3]> = mesh
+            .normals
+            .chunks_exact(3)
+            .map(|c| [c[0], c[1], c[2]])
+            .collect();
         let colors: Vec<[f32; 4]> = if mesh.vertex_color.len() == mesh.positions.len() {
             mesh.vertex_color
                 .chunks_exact(3)

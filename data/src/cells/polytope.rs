@@ -1,0 +1,185 @@
+//! Planes, halfspaces and convex polygons/polyhedra: the small amount of computational geometry
+//! the visibility algorithms need (clipping a region to halfspaces, its bounding box).
+
+use crate::geometry::Aabb;
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+
+/// Tolerance for "on the plane", in metres.
+pub const EPS: f32 = 1e-4;
+
+/// The halfspace `normal · x <= d` (its boundary is the plane `normal · x = d`).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Plane {
+    /// Outward normal (need not be unit length).
+    pub normal: [f32; 3],
+    /// Offset.
+    pub d: f32,
+}
+
+impl Plane {
+    /// The halfspace bounded by the plane through `p` with outward normal `n`.
+    pub fn through(p: Vec3, n: Vec3) -> Plane {
+        Plane {
+            normal: n.into(),
+            d: n.dot(p),
+        }
+    }
+
+    /// Signed distance-like value: `<= 0` inside the halfspace.
+    pub fn eval(&self, p: Vec3) -> f32 {
+        Vec3::from(self.normal).dot(p) - self.d
+    }
+
+    /// Whether any point of the closed box lies in the closed halfspace (within [`EPS`]).
+    pub fn touches_box(&self, b: &Aabb) -> bool {
+        let n = Vec3::from(self.normal);
+        // The box corner that minimises n · x.
+        let corner = Vec3::new(
+            if n.x >= 0.0 { b.min[0] } else { b.max[0] },
+            if n.y >= 0.0 { b.min[1] } else { b.max[1] },
+            if n.z >= 0.0 { b.min[2] } else { b.max[2] },
+        );
+        self.eval(corner) <= EPS * n.length().max(1.0)
+    }
+}
+
+/// Clips a convex polygon to the halfspace (Sutherland–Hodgman, one plane).
+pub fn clip_polygon(poly: &[Vec3], plane: &Plane) -> Vec<Vec3> {
+    let mut out = Vec::with_capacity(poly.len() + 1);
+    for i in 0..poly.len() {
+        let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+        let (da, db) = (plane.eval(a), plane.eval(b));
+        if da <= 0.0 {
+            out.push(a);
+        }
+        if (da < 0.0 && db > 0.0) || (da > 0.0 && db < 0.0) {
+            out.push(a + (b - a) * (da / (da - db)));
+        }
+    }
+    out
+}
+
+/// The six faces of a box as counter-clockwise polygons.
+pub fn box_faces(b: &Aabb) -> Vec<Vec<Vec3>> {
+    let (lo, hi) = (Vec3::from(b.min), Vec3::from(b.max));
+    let mut faces = Vec::with_capacity(6);
+    for axis in 0..3 {
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        for side in [lo[axis], hi[axis]] {
+            let corner = |a: f32, c: f32| {
+                let mut p = Vec3::ZERO;
+                p[axis] = side;
+                p[u] = a;
+                p[v] = c;
+                p
+            };
+            faces.push(vec![
+                corner(lo[u], lo[v]),
+                corner(hi[u], lo[v]),
+                corner(hi[u], hi[v]),
+                corner(lo[u], hi[v]),
+            ]);
+        }
+    }
+    faces
+}
+
+/// Bounding box of `{x in b : x satisfies every plane}`, or `None` if that set is empty.
+///
+/// The box is kept as a convex polyhedron (a list of face polygons): each plane clips every
+/// face, and the points where it cuts them, ordered around their centroid, become the new cap
+/// face, so later planes clip the caps too and no vertex of the result is lost.
+pub fn clipped_box_bounds(b: &Aabb, planes: &[Plane]) -> Option<Aabb> {
+    let mut faces = box_faces(b);
+    for p in planes {
+        let mut cut = Vec::new();
+        for f in &mut faces {
+            let clipped = clip_polygon(f, p);
+            cut.extend(clipped.iter().copied().filter(|q| p.eval(*q).abs() <= EPS));
+            *f = clipped;
+        }
+        faces.retain(|f| f.len() >= 3);
+        if faces.is_empty() {
+            return None;
+        }
+        if cut.len() >= 3 {
+            faces.push(order_around_centroid(cut, Vec3::from(p.normal)));
+        }
+    }
+    let mut out = Aabb::EMPTY;
+    for q in faces.iter().flatten() {
+        out.include(*q);
+    }
+    (!out.is_empty()).then_some(out)
+}
+
+/// Orders coplanar points by angle around their centroid (a convex cap polygon).
+fn order_around_centroid(points: Vec<Vec3>, normal: Vec3) -> Vec<Vec3> {
+    let c = points.iter().copied().sum::<Vec3>() / points.len() as f32;
+    let n = normal.normalize_or_zero();
+    let u = n.any_orthonormal_vector();
+    let v = n.cross(u);
+    let mut keyed: Vec<(f32, Vec3)> = points
+        .into_iter()
+        .map(|q| ((q - c).dot(v).atan2((q - c).dot(u)), q))
+        .collect();
+    keyed.sort_by(|a, b| a.0.total_cmp(&b.0));
+    keyed.into_iter().map(|(_, q)| q).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit() -> Aabb {
+        Aabb {
+            min: [0.0; 3],
+            max: [1.0; 3],
+        }
+    }
+
+    #[test]
+    fn clipping_a_box_by_a_diagonal_plane() {
+        // x + y <= 1 keeps the lower-left prism.
+        let p = Plane::through(Vec3::new(1.0, 0.0, 0.0), Vec3::new(1.0, 1.0, 0.0));
+        let b = clipped_box_bounds(&unit(), &[p]).expect("non-empty");
+        assert_eq!(b.max, [1.0, 1.0, 1.0]);
+        // x <= 0.25 and y <= 0.5
+        let px = Plane::through(Vec3::new(0.25, 0.0, 0.0), Vec3::X);
+        let py = Plane::through(Vec3::new(0.0, 0.5, 0.0), Vec3::Y);
+        let b = clipped_box_bounds(&unit(), &[px, py]).unwrap();
+        assert!((b.max[0] - 0.25).abs() < 1e-6 && (b.max[1] - 0.5).abs() < 1e-6);
+        assert_eq!(b.max[2], 1.0);
+    }
+
+    #[test]
+    fn a_corner_cut_by_three_planes_keeps_its_interior_vertex() {
+        // x + y + z >= 2.5 (as -x - y - z <= -2.5) keeps a small corner tetrahedron; then
+        // x <= 0.9 and y <= 0.9 and z <= 0.9 cut it to a tiny region whose max is 0.9, min 0.7.
+        let planes = [
+            Plane::through(Vec3::splat(2.5 / 3.0), -Vec3::ONE),
+            Plane::through(Vec3::splat(0.9), Vec3::X),
+            Plane::through(Vec3::splat(0.9), Vec3::Y),
+            Plane::through(Vec3::splat(0.9), Vec3::Z),
+        ];
+        let b = clipped_box_bounds(&unit(), &planes).unwrap();
+        for i in 0..3 {
+            assert!((b.max[i] - 0.9).abs() < 1e-4, "{b:?}");
+            assert!((b.min[i] - 0.7).abs() < 1e-4, "{b:?}");
+        }
+    }
+
+    #[test]
+    fn empty_when_the_plane_excludes_the_box() {
+        let p = Plane::through(Vec3::new(-1.0, 0.0, 0.0), Vec3::X); // x <= -1
+        assert!(clipped_box_bounds(&unit(), &[p]).is_none());
+        assert!(!p.touches_box(&unit()));
+    }
+
+    #[test]
+    fn touches_box_is_closed() {
+        let p = Plane::through(Vec3::ZERO, Vec3::X); // x <= 0 touches the x = 0 face
+        assert!(p.touches_box(&unit()));
+    }
+}

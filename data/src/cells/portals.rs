@@ -1,0 +1,231 @@
+//! Portals: the open parts of the boundaries shared by two cells (Funkhouser §3.2.1).
+//!
+//! For each cell and each of its three high faces, the cells on the other side are found
+//! through the k-D tree; on each shared rectangle, the occluder faces lying in that plane are
+//! marked opaque on the grid their edges induce, and the open grid cells are merged into
+//! rectangles: the portals. The cell adjacency graph is the result. Cells left without any
+//! portal (the space inside walls and slabs) are marked dead: no observer can get there.
+
+use super::{CellGraph, Portal, touches};
+use crate::geometry::Aabb;
+use std::collections::HashMap;
+
+/// Bucket size of the occluder lookup grid (metres).
+const BUCKET: f32 = 4.0;
+/// Ignore open slivers smaller than this (square metres).
+const MIN_AREA: f32 = 1e-6;
+
+/// Fills `graph.portals` and every live cell's portal list.
+pub fn find_portals(graph: &mut CellGraph, occluders: &[Aabb]) {
+    let lookup = Buckets::new(occluders);
+    let mut portals = Vec::new();
+    for c in 0..graph.cells.len() {
+        let b = graph.cells[c].bounds;
+        for axis in 0..3 {
+            let at = b.max[axis];
+            let mut face = b;
+            face.min[axis] = at;
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            for n in graph.cells_touching(&face) {
+                let nb = graph.cells[n as usize].bounds;
+                if (nb.min[axis] - at).abs() > 1e-5 {
+                    continue;
+                }
+                let mut shared = face;
+                for w in [u, v] {
+                    shared.min[w] = b.min[w].max(nb.min[w]);
+                    shared.max[w] = b.max[w].min(nb.max[w]);
+                }
+                if (shared.max[u] - shared.min[u]) * (shared.max[v] - shared.min[v]) <= MIN_AREA {
+                    continue;
+                }
+                let blockers: Vec<Aabb> = lookup
+                    .near(&shared, occluders)
+                    .into_iter()
+                    .filter(|o| {
+                        (o.min[axis] - at).abs() <= 1e-5 && (o.max[axis] - at).abs() <= 1e-5
+                    })
+                    .collect();
+                for rect in open_rectangles(&shared, axis, &blockers) {
+                    portals.push(Portal {
+                        axis: axis as u8,
+                        rect,
+                        cells: [c as u32, n],
+                    });
+                }
+            }
+        }
+    }
+    for (i, p) in portals.iter().enumerate() {
+        for c in p.cells {
+            graph.cells[c as usize].portals.push(i as u32);
+        }
+    }
+    graph.portals = portals;
+    // With a single cell there is nothing to connect; otherwise a cell without portals is
+    // sealed space (inside a wall or slab).
+    if graph.cells.len() > 1 {
+        for cell in &mut graph.cells {
+            cell.live = !cell.portals.is_empty();
+        }
+    }
+}
+
+/// The parts of `rect` (flat along `axis`) not covered by the blockers' projections, as
+/// rectangles: grid cells between blocker edges, merged along rows, then rows merged.
+pub fn open_rectangles(rect: &Aabb, axis: usize, blockers: &[Aabb]) -> Vec<Aabb> {
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    let cuts = |w: usize| -> Vec<f32> {
+        let mut xs = vec![rect.min[w], rect.max[w]];
+        for b in blockers {
+            for x in [b.min[w], b.max[w]] {
+                if x > rect.min[w] && x < rect.max[w] {
+                    xs.push(x);
+                }
+            }
+        }
+        xs.sort_by(f32::total_cmp);
+        xs.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
+        xs
+    };
+    let (us, vs) = (cuts(u), cuts(v));
+    let covered = |i: usize, j: usize| {
+        let (cu, cv) = ((us[i] + us[i + 1]) * 0.5, (vs[j] + vs[j + 1]) * 0.5);
+        blockers
+            .iter()
+            .any(|b| b.min[u] <= cu && cu <= b.max[u] && b.min[v] <= cv && cv <= b.max[v])
+    };
+    // Runs of open cells per row j, as (u0, u1) index pairs.
+    let mut rects: Vec<(usize, usize, usize, usize)> = Vec::new(); // (i0, i1, j0, j1) exclusive
+    for j in 0..vs.len() - 1 {
+        let mut i = 0;
+        while i < us.len() - 1 {
+            if covered(i, j) {
+                i += 1;
+                continue;
+            }
+            let start = i;
+            while i < us.len() - 1 && !covered(i, j) {
+                i += 1;
+            }
+            // Extend a rectangle from the previous row with the same span, else start one.
+            match rects
+                .iter_mut()
+                .find(|r| r.0 == start && r.1 == i && r.3 == j)
+            {
+                Some(r) => r.3 = j + 1,
+                None => rects.push((start, i, j, j + 1)),
+            }
+        }
+    }
+    rects
+        .into_iter()
+        .map(|(i0, i1, j0, j1)| {
+            let mut r = *rect;
+            r.min[u] = us[i0];
+            r.max[u] = us[i1];
+            r.min[v] = vs[j0];
+            r.max[v] = vs[j1];
+            r
+        })
+        .filter(|r| (r.max[u] - r.min[u]) * (r.max[v] - r.min[v]) > MIN_AREA)
+        .collect()
+}
+
+/// A uniform grid of buckets over the occluders, for "which occluders are near this box".
+struct Buckets {
+    map: HashMap<(i32, i32, i32), Vec<u32>>,
+}
+
+impl Buckets {
+    fn new(occluders: &[Aabb]) -> Self {
+        let mut map: HashMap<(i32, i32, i32), Vec<u32>> = HashMap::new();
+        for (i, o) in occluders.iter().enumerate() {
+            for key in keys(o) {
+                map.entry(key).or_default().push(i as u32);
+            }
+        }
+        Buckets { map }
+    }
+
+    fn near(&self, q: &Aabb, occluders: &[Aabb]) -> Vec<Aabb> {
+        let mut ids: Vec<u32> = keys(q)
+            .filter_map(|k| self.map.get(&k))
+            .flatten()
+            .copied()
+            .collect();
+        ids.sort_unstable();
+        ids.dedup();
+        ids.into_iter()
+            .map(|i| occluders[i as usize])
+            .filter(|o| touches(o, q))
+            .collect()
+    }
+}
+
+fn keys(b: &Aabb) -> impl Iterator<Item = (i32, i32, i32)> {
+    let lo = b.min.map(|x| ((x - 1e-4) / BUCKET).floor() as i32);
+    let hi = b.max.map(|x| ((x + 1e-4) / BUCKET).floor() as i32);
+    (lo[0]..=hi[0]).flat_map(move |x| {
+        (lo[1]..=hi[1]).flat_map(move |y| (lo[2]..=hi[2]).map(move |z| (x, y, z)))
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cells::subdivide::subdivide;
+
+    fn bx(min: [f32; 3], max: [f32; 3]) -> Aabb {
+        Aabb { min, max }
+    }
+
+    #[test]
+    fn a_hole_in_the_middle_leaves_one_open_rectangle() {
+        let rect = bx([0.0, 0.0, 0.0], [0.0, 3.0, 4.0]);
+        let blockers = [
+            bx([-0.1, 0.0, 0.0], [0.0, 3.0, 1.0]),
+            bx([-0.1, 0.0, 2.0], [0.0, 3.0, 4.0]),
+            bx([0.0, 2.0, 1.0], [0.2, 3.0, 2.0]),
+        ];
+        let open = open_rectangles(&rect, 0, &blockers);
+        assert_eq!(open.len(), 1, "{open:?}");
+        assert_eq!(open[0].min, [0.0, 0.0, 1.0]);
+        assert_eq!(open[0].max, [0.0, 2.0, 2.0]);
+    }
+
+    #[test]
+    fn two_rooms_joined_by_a_door_have_portals_only_through_it() {
+        let walls = crate::cells::subdivide::tests::faces_of(&[
+            bx([5.0, 0.0, 0.0], [5.2, 3.0, 1.0]),
+            bx([5.0, 0.0, 2.0], [5.2, 3.0, 4.0]),
+            bx([5.0, 2.0, 1.0], [5.2, 3.0, 2.0]),
+        ]);
+        let mut g = subdivide(&bx([0.0; 3], [10.0, 3.0, 4.0]), &walls);
+        find_portals(&mut g, &walls);
+        let door = g.locate(glam::Vec3::new(5.1, 1.0, 1.5)).unwrap();
+        let left = g.locate(glam::Vec3::new(2.0, 1.0, 2.0)).unwrap();
+        let right = g.locate(glam::Vec3::new(8.0, 1.0, 2.0)).unwrap();
+        let neighbours = |c: u32| -> Vec<u32> {
+            g.cells[c as usize]
+                .portals
+                .iter()
+                .map(|&p| g.portals[p as usize].other(c))
+                .collect()
+        };
+        assert!(neighbours(door).contains(&left) && neighbours(door).contains(&right));
+        assert!(
+            !neighbours(left).contains(&right),
+            "the wall must separate the rooms"
+        );
+        let inside_wall = g.locate(glam::Vec3::new(5.1, 1.0, 3.0)).unwrap();
+        assert!(
+            !g.cells[inside_wall as usize].live,
+            "wall interior must be dead"
+        );
+        assert!(g.cells[door as usize].live);
+        for p in &g.portals {
+            assert!(g.cells[p.cells[0] as usize].live && g.cells[p.cells[1] as usize].live);
+        }
+    }
+}

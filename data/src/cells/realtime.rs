@@ -1,0 +1,177 @@
+//! Real-time visibility for one observer (Funkhouser §4.1.2), shared by client and server.
+//!
+//! - Eye-to-cell: a depth-first search from the eye's cell through portals, narrowing a wedge
+//!   of planes through the eye: each portal is clipped to the current wedge and the planes
+//!   through the eye and the clipped polygon's edges become the wedge beyond it.
+//! - Eye-to-object: the objects of the precomputed cell-to-object set (the eye cell's stab list)
+//!   in each reached cell whose boxes touch that cell's wedge.
+//! - Frustum-to-cell / frustum-to-object: plain view-frustum culling, for comparison (the FTC
+//!   and FTO rows of Table 4.1).
+
+use super::polytope::{Plane, clip_polygon};
+use super::{CellGraph, StabList};
+use crate::geometry::Aabb;
+use glam::Vec3;
+
+/// A view frustum as inward-facing halfspaces (`normal · x <= d` keeps the inside).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frustum {
+    /// The eye.
+    pub eye: Vec3,
+    /// Side planes (through the eye).
+    pub planes: Vec<Plane>,
+}
+
+impl Frustum {
+    /// A symmetric perspective frustum (no near/far planes: walls do the far culling).
+    pub fn new(eye: Vec3, dir: Vec3, up: Vec3, half_fov_x: f32, half_fov_y: f32) -> Frustum {
+        let f = dir.normalize_or_zero();
+        let r = f.cross(up).normalize_or_zero();
+        let u = r.cross(f);
+        let side = |axis: Vec3, half: f32, sign: f32| {
+            // Outward normal of the plane tilted `half` from the forward direction.
+            let n = axis * sign * half.cos() - f * half.sin();
+            Plane::through(eye, n)
+        };
+        Frustum {
+            eye,
+            planes: vec![
+                side(r, half_fov_x, 1.0),
+                side(r, half_fov_x, -1.0),
+                side(u, half_fov_y, 1.0),
+                side(u, half_fov_y, -1.0),
+            ],
+        }
+    }
+
+    /// A frustum that sees everything (an observer looking in every direction).
+    pub fn all_around(eye: Vec3) -> Frustum {
+        Frustum {
+            eye,
+            planes: Vec::new(),
+        }
+    }
+
+    /// Whether a box touches the frustum (conservative plane-by-plane test).
+    pub fn touches(&self, b: &Aabb) -> bool {
+        self.planes.iter().all(|p| p.touches_box(b))
+    }
+}
+
+/// A cell reached from the eye and the wedge through which it is seen.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reached {
+    /// The cell.
+    pub cell: u32,
+    /// The wedge (planes through the eye) bounding what of the cell is visible.
+    pub wedge: Vec<Plane>,
+}
+
+/// Eye-to-cell visibility. Empty when the eye is outside every live cell.
+pub fn eye_to_cell(graph: &CellGraph, view: &Frustum) -> Vec<Reached> {
+    let Some(start) = graph
+        .locate(view.eye)
+        .filter(|&c| graph.cells[c as usize].live)
+    else {
+        return Vec::new();
+    };
+    let mut out = vec![Reached {
+        cell: start,
+        wedge: view.planes.clone(),
+    }];
+    let mut stack = vec![(start, view.planes.clone(), vec![start])];
+    while let Some((cell, wedge, path)) = stack.pop() {
+        for &p in &graph.cells[cell as usize].portals {
+            let portal = &graph.portals[p as usize];
+            let next = portal.other(cell);
+            if path.contains(&next) {
+                continue;
+            }
+            let mut poly = portal.corners().to_vec();
+            for pl in &wedge {
+                poly = clip_polygon(&poly, pl);
+                if poly.len() < 3 {
+                    break;
+                }
+            }
+            if poly.len() < 3 || polygon_area(&poly) < 1e-8 {
+                continue;
+            }
+            let narrowed = wedge_through(view.eye, &poly);
+            if narrowed.is_empty() {
+                continue; // the eye lies in the portal's plane: nothing seen through it
+            }
+            out.push(Reached {
+                cell: next,
+                wedge: narrowed.clone(),
+            });
+            let mut next_path = path.clone();
+            next_path.push(next);
+            stack.push((next, narrowed, next_path));
+        }
+    }
+    out
+}
+
+/// Eye-to-object visibility: objects of the eye cell's stab list inside the wedges.
+pub fn eye_to_object(reached: &[Reached], stab: &StabList, objects: &[Aabb]) -> Vec<u32> {
+    let mut out = Vec::new();
+    for r in reached {
+        let Some(entry) = stab.entry(r.cell) else {
+            continue;
+        };
+        out.extend(entry.objects.iter().copied().filter(|&o| {
+            let b = &objects[o as usize];
+            r.wedge.iter().all(|p| p.touches_box(b))
+        }));
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+/// Cells touching the view frustum (Table 4.1's FTC).
+pub fn frustum_to_cell(graph: &CellGraph, view: &Frustum) -> Vec<u32> {
+    (0..graph.cells.len() as u32)
+        .filter(|&c| graph.cells[c as usize].live && view.touches(&graph.cells[c as usize].bounds))
+        .collect()
+}
+
+/// Objects touching the view frustum (Table 4.1's FTO).
+pub fn frustum_to_object(objects: &[Aabb], view: &Frustum) -> Vec<u32> {
+    (0..objects.len() as u32)
+        .filter(|&o| view.touches(&objects[o as usize]))
+        .collect()
+}
+
+/// The planes through the eye and each edge of a convex polygon, oriented to keep the polygon
+/// (and what lies behind it) inside.
+fn wedge_through(eye: Vec3, poly: &[Vec3]) -> Vec<Plane> {
+    let centroid = poly.iter().copied().sum::<Vec3>() / poly.len() as f32;
+    let mut planes = Vec::with_capacity(poly.len());
+    for i in 0..poly.len() {
+        let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+        let n = (a - eye).cross(b - eye);
+        if n.length_squared() < 1e-12 {
+            continue;
+        }
+        let mut plane = Plane::through(eye, n.normalize());
+        if plane.eval(centroid) > 0.0 {
+            plane = Plane::through(eye, -Vec3::from(plane.normal));
+        }
+        planes.push(plane);
+    }
+    // An eye in the polygon's plane sees it edge-on: every edge plane holds the centroid.
+    if planes.iter().all(|p| p.eval(centroid).abs() < 1e-6) {
+        return Vec::new();
+    }
+    planes
+}
+
+fn polygon_area(poly: &[Vec3]) -> f32 {
+    let mut n = Vec3::ZERO;
+    for i in 1..poly.len().saturating_sub(1) {
+        n += (poly[i] - poly[0]).cross(poly[i + 1] - poly[0]);
+    }
+    n.length() * 0.5
+}
