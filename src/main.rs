@@ -23,6 +23,8 @@ enum Command {
     Build(cmd::build::Args),
     /// Print statistics of a display database.
     Inspect(cmd::inspect::Args),
+    /// Check the stored visibility against the occluders by casting random rays.
+    Verify(cmd::verify::Args),
 }
 
 fn main() -> ExitCode {
@@ -38,6 +40,7 @@ fn main() -> ExitCode {
         Command::Generate(a) => cmd::generate::run(a),
         Command::Build(a) => cmd::build::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Verify(a) => cmd::verify::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

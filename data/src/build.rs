@@ -7,7 +7,11 @@
 use crate::bake::bake;
 use crate::error::Result;
 use crate::format::writer::{DbWriter, WriteSummary};
-use crate::format::{Header, InstanceRecord, LodRecord, ObjectRecord, SegmentKind};
+use crate::cells::occluders::occluder_boxes;
+use crate::cells::{CellStats, precompute};
+use crate::format::{
+    CellIndex, Header, InstanceRecord, LodRecord, ObjectRecord, SegmentKind, encode_segment,
+};
 use crate::geometry::{Aabb, encode_geometry};
 use crate::lod::{LodMesh, complete_lods};
 use crate::model::{Instance, Model};
@@ -27,6 +31,8 @@ pub struct BuildOptions {
     pub flatten: bool,
     /// Model name stored in the header (default: the first source's file stem).
     pub name: Option<String>,
+    /// Skip the cell subdivision and visibility precomputation.
+    pub no_cells: bool,
 }
 
 /// Receives progress from long build steps (the CLI draws progress bars with it).
@@ -50,6 +56,8 @@ pub struct BuildReport {
     pub lod_time: Duration,
     /// Time spent encoding and writing geometry and the header.
     pub write_time: Duration,
+    /// Cell statistics (with subdivision and visibility times), when cells were built.
+    pub cells: Option<CellStats>,
 }
 
 /// Builds a display database at `out` from an imported model.
@@ -89,6 +97,12 @@ pub fn build(
             .collect()
     };
     let bounds = records.iter().fold(Aabb::EMPTY, |b, r| b.union(&r.bounds));
+    let cells = if opts.no_cells {
+        None
+    } else {
+        Some(write_cells(&mut w, &lods, &instances, &records, &bounds, obs)?)
+    };
+    let cell_stats = cells.as_ref().map(|c| c.stats.clone());
     let name = opts.name.clone().unwrap_or_else(|| {
         sources
             .first()
@@ -103,12 +117,55 @@ pub fn build(
         materials,
         objects,
         instances: records,
+        cells,
     };
     let written = w.finish(&header)?;
     Ok(BuildReport {
         written,
         lod_time,
         write_time: t1.elapsed(),
+        cells: cell_stats,
+    })
+}
+
+/// Subdivides into cells, precomputes visibility (Funkhouser §3.2) and writes the cell graph,
+/// the occluders and one stab list per cell.
+fn write_cells(
+    w: &mut DbWriter,
+    lods: &[(String, u32, Vec<LodMesh>)],
+    instances: &[Instance],
+    records: &[InstanceRecord],
+    bounds: &Aabb,
+    obs: &dyn Observer,
+) -> Result<CellIndex> {
+    let occluders = occluder_boxes(instances.iter().filter_map(|i| {
+        let finest = &lods[i.def as usize].2.first()?.mesh;
+        Some((finest, i.transform, i.occluder))
+    }));
+    let objects: Vec<Aabb> = records.iter().map(|r| r.bounds).collect();
+    obs.stage("cells", 1);
+    let pre = precompute(bounds, &occluders, &objects, &|name, n| obs.stage(name, n), &|| {
+        obs.advance(1)
+    });
+    let graph_segment = w.add_segment(SegmentKind::CellGraph, &encode_segment(&pre.graph))?;
+    let occluder_segment = w.add_segment(SegmentKind::Occluders, &encode_segment(&occluders))?;
+    let stab_segments = pre
+        .stabs
+        .iter()
+        .zip(&pre.graph.cells)
+        .map(|(s, c)| {
+            if c.live {
+                w.add_segment(SegmentKind::StabList, &encode_segment(s))
+            } else {
+                Ok(u32::MAX)
+            }
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(CellIndex {
+        graph_segment,
+        occluder_segment,
+        stab_segments,
+        stats: pre.stats,
     })
 }
 

@@ -54,6 +54,12 @@ pub struct DbStats {
     pub file_bytes: u64,
     /// World bounds (min, max).
     pub bounds: [[f32; 3]; 2],
+    /// Leaf cells (0 without cells).
+    pub cells: u64,
+    /// Portals.
+    pub portals: u64,
+    /// Funkhouser Table 3.2 and precomputation times, when the database has cells.
+    pub cell_stats: Option<crate::cells::CellStats>,
 }
 
 /// Computes the statistics of an open database (header only; no segment is read).
@@ -114,6 +120,9 @@ pub fn stats(db: &Database) -> DbStats {
         geometry_bytes,
         file_bytes: db.file_len(),
         bounds: [h.bounds.min, h.bounds.max],
+        cells: h.cells.as_ref().map_or(0, |c| c.stats.cells),
+        portals: h.cells.as_ref().map_or(0, |c| c.stats.portals),
+        cell_stats: h.cells.as_ref().map(|c| c.stats.clone()),
     }
 }
 
@@ -167,6 +176,28 @@ impl DbStats {
                 r.mean_per_object,
                 r.max_per_object
             ));
+        }
+        if let Some(c) = &self.cell_stats {
+            s.push_str(&format!(
+                "\n  cells {} ({} live), portals {}, occluder faces {}{}\n  subdivision {:.2} s, visibility {:.2} s\n",
+                c.cells,
+                c.live_cells,
+                c.portals,
+                c.occluder_boxes,
+                if c.grid_fallback { " (grid fallback)" } else { "" },
+                c.subdivision_seconds,
+                c.visibility_seconds
+            ));
+            s.push_str(&format!("\n  {:<28} {:>10} {:>8}\n", "per live cell", "mean", "max"));
+            for (name, (mean, max)) in [
+                ("portals", c.portals_per_cell),
+                ("objects completely inside", c.objects_inside),
+                ("objects partially inside", c.objects_partial),
+                ("cells visible", c.cells_visible),
+                ("objects visible", c.objects_visible),
+            ] {
+                s.push_str(&format!("  {name:<28} {mean:>10.2} {max:>8}\n"));
+            }
         }
         s
     }

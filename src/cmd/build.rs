@@ -25,6 +25,9 @@ pub struct Args {
     /// Model name stored in the database (default: the first model's file name).
     #[arg(long)]
     name: Option<String>,
+    /// Skip the cells, portals and visibility precomputation.
+    #[arg(long)]
+    no_cells: bool,
 }
 
 /// Imports the models, builds, and prints a one-line summary.
@@ -45,6 +48,7 @@ pub fn run(a: Args) -> Result<()> {
     let opts = BuildOptions {
         flatten: a.flatten,
         name: a.name,
+        no_cells: a.no_cells,
     };
     let report = build(model, &a.output, &opts, &bars)?;
     bars.finish();
@@ -58,5 +62,17 @@ pub fn run(a: Args) -> Result<()> {
         report.lod_time.as_secs_f64(),
         report.write_time.as_secs_f64(),
     );
+    if let Some(c) = &report.cells {
+        eprintln!(
+            "cells: {} ({} live), {} portals from {} occluder faces; subdivision {:.2} s, visibility {:.2} s{}",
+            c.cells,
+            c.live_cells,
+            c.portals,
+            c.occluder_boxes,
+            c.subdivision_seconds,
+            c.visibility_seconds,
+            if c.grid_fallback { " (no occluders: grid fallback)" } else { "" },
+        );
+    }
     Ok(())
 }

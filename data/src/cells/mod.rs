@@ -150,10 +150,10 @@ impl CellGraph {
                 Some(KdNode::Leaf(_)) => {}
                 Some(KdNode::Split { axis, at, lo, hi }) => {
                     let a = *axis as usize;
-                    if query.min[a] <= *at {
+                    if query.min[a] <= *at + polytope::EPS {
                         stack.push(*lo);
                     }
-                    if query.max[a] >= *at {
+                    if query.max[a] >= *at - polytope::EPS {
                         stack.push(*hi);
                     }
                 }

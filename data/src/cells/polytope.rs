@@ -103,6 +103,14 @@ pub fn clipped_box_bounds(b: &Aabb, planes: &[Plane]) -> Option<Aabb> {
         if faces.is_empty() {
             return None;
         }
+        // Each cut point is shared by two faces; keep one of each.
+        let mut unique: Vec<Vec3> = Vec::with_capacity(cut.len() / 2);
+        for q in cut {
+            if !unique.iter().any(|u| u.distance_squared(q) <= EPS * EPS) {
+                unique.push(q);
+            }
+        }
+        let cut = unique;
         if cut.len() >= 3 {
             faces.push(order_around_centroid(cut, Vec3::from(p.normal)));
         }

@@ -17,20 +17,19 @@ use std::collections::HashMap;
 pub const MIN_COVERAGE: f32 = 0.3;
 /// Thinnest cell the splitter makes (metres).
 pub const MIN_THICKNESS: f32 = 0.005;
-/// Open space kept around the model (metres), so sightlines leaving through one window and
-/// entering through another are seen by the search.
-pub const MARGIN: f32 = 1.0;
 /// Grid fallback: largest cell edge as a fraction of the model's largest extent.
 const GRID_DIVISIONS: f32 = 6.0;
 /// Deepest tree we build.
 const MAX_DEPTH: usize = 64;
 
-/// Builds the k-D subdivision of `bounds` (plus [`MARGIN`]) along the occluder boxes.
+/// Builds the k-D subdivision of `bounds` along the occluder faces.
+///
+/// The root is the model's bounding box and nothing beyond it: a sightline that leaves a box
+/// never comes back into it, so space outside holds nothing visible (windows on the outside
+/// walls are simply portals to nowhere). Courtyards and other outside space inside the box
+/// are cells like any other.
 pub fn subdivide(bounds: &Aabb, occluders: &[Aabb]) -> CellGraph {
-    let root = Aabb {
-        min: bounds.min.map(|x| x - MARGIN),
-        max: bounds.max.map(|x| x + MARGIN),
-    };
+    let root = *bounds;
     let mut graph = CellGraph {
         bounds: root,
         cells: Vec::new(),

@@ -23,6 +23,21 @@ pub struct Header {
     pub objects: Vec<ObjectRecord>,
     /// Object instances.
     pub instances: Vec<InstanceRecord>,
+    /// Cells, portals and precomputed visibility, when built.
+    pub cells: Option<CellIndex>,
+}
+
+/// Where the cell data lives (Funkhouser Fig. 3.23: cells, portals, stab lists).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CellIndex {
+    /// Segment holding the bincode [`crate::cells::CellGraph`].
+    pub graph_segment: u32,
+    /// Segment holding the occluder faces (`Vec<Aabb>`).
+    pub occluder_segment: u32,
+    /// Per cell, the segment of its [`crate::cells::StabList`] (`u32::MAX` for dead cells).
+    pub stab_segments: Vec<u32>,
+    /// Table 3.2 statistics and precomputation times.
+    pub stats: crate::cells::CellStats,
 }
 
 /// One LOD of an object: where its geometry is and what it costs.
@@ -126,6 +141,22 @@ impl Header {
                     o.material,
                     self.materials.len()
                 ));
+            }
+        }
+        if let Some(c) = &self.cells {
+            let kind = |id: u32, want: SegmentKind, what: &str| -> Result<(), String> {
+                let seg = segments
+                    .get(id as usize)
+                    .ok_or_else(|| format!("{what} refers to missing segment {id}"))?;
+                if SegmentKind::from_u16(seg.kind) != Some(want) {
+                    return Err(format!("{what} segment {id} has the wrong kind"));
+                }
+                Ok(())
+            };
+            kind(c.graph_segment, SegmentKind::CellGraph, "cell graph")?;
+            kind(c.occluder_segment, SegmentKind::Occluders, "occluders")?;
+            for &s in c.stab_segments.iter().filter(|&&s| s != u32::MAX) {
+                kind(s, SegmentKind::StabList, "stab list")?;
             }
         }
         for (i, inst) in self.instances.iter().enumerate() {

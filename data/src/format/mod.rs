@@ -18,7 +18,7 @@ mod header;
 pub mod reader;
 pub mod writer;
 
-pub use header::{Header, InstanceRecord, LodRecord, ObjectRecord};
+pub use header::{CellIndex, Header, InstanceRecord, LodRecord, ObjectRecord};
 
 use bytemuck::{Pod, Zeroable};
 
@@ -47,6 +47,8 @@ pub enum SegmentKind {
     StabList = 3,
     /// A texture (reserved).
     Texture = 4,
+    /// The occluder faces the cells were built from (used by `portico verify`).
+    Occluders = 5,
 }
 
 impl SegmentKind {
@@ -57,6 +59,7 @@ impl SegmentKind {
             2 => SegmentKind::CellGraph,
             3 => SegmentKind::StabList,
             4 => SegmentKind::Texture,
+            5 => SegmentKind::Occluders,
             _ => return None,
         })
     }
@@ -147,9 +150,25 @@ pub fn alignment_for(len: u64) -> u64 {
     }
 }
 
-/// The bincode configuration of the header (standard, little-endian varints).
+/// The bincode configuration of the header and of structured segments.
 pub(crate) fn bincode_config() -> impl bincode::config::Config {
     bincode::config::standard().with_limit::<{ MAX_HEADER_BYTES as usize }>()
+}
+
+/// Encodes a structured segment (cell graph, stab list, occluders) with bincode 2.
+pub fn encode_segment<T: serde::Serialize>(value: &T) -> Vec<u8> {
+    // Encoding plain data structures into a Vec cannot fail short of running out of memory.
+    bincode::serde::encode_to_vec(value, bincode_config()).unwrap_or_default()
+}
+
+/// Decodes a structured segment, rejecting trailing bytes.
+pub fn decode_segment<T: serde::de::DeserializeOwned>(bytes: &[u8]) -> Result<T, String> {
+    let (v, used) = bincode::serde::decode_from_slice(bytes, bincode_config())
+        .map_err(|e| format!("does not decode: {e}"))?;
+    if used != bytes.len() {
+        return Err("has trailing bytes".into());
+    }
+    Ok(v)
 }
 
 #[cfg(test)]

@@ -13,7 +13,9 @@ use super::{
     SegmentKind, bincode_config, checksum, segment_flags,
 };
 use crate::error::{DataError, Result};
-use crate::geometry::GeometryView;
+use super::decode_segment;
+use crate::cells::{CellGraph, StabList};
+use crate::geometry::{Aabb, GeometryView};
 use bytes::Bytes;
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -128,6 +130,46 @@ impl Database {
             ));
         }
         Ok(bytes)
+    }
+
+    /// The cell graph, if the database has cells.
+    pub fn cell_graph(&self) -> Result<Option<CellGraph>> {
+        let Some(c) = &self.header.cells else {
+            return Ok(None);
+        };
+        let graph: CellGraph = self.structured(c.graph_segment)?;
+        if graph.cells.len() != c.stab_segments.len() {
+            return Err(DataError::corrupt(&self.path, "cell graph and cell index disagree"));
+        }
+        Ok(Some(graph))
+    }
+
+    /// The stab list of one cell (empty for dead cells), if the database has cells.
+    pub fn stab_list(&self, cell: u32) -> Result<StabList> {
+        let seg = self
+            .header
+            .cells
+            .as_ref()
+            .and_then(|c| c.stab_segments.get(cell as usize))
+            .ok_or_else(|| DataError::NotFound(format!("cell {cell} does not exist")))?;
+        if *seg == u32::MAX {
+            return Ok(StabList::default());
+        }
+        self.structured(*seg)
+    }
+
+    /// The occluder faces the cells were built from.
+    pub fn occluders(&self) -> Result<Vec<Aabb>> {
+        match &self.header.cells {
+            Some(c) => self.structured(c.occluder_segment),
+            None => Ok(Vec::new()),
+        }
+    }
+
+    fn structured<T: serde::de::DeserializeOwned>(&self, id: u32) -> Result<T> {
+        let bytes = self.segment(id)?;
+        decode_segment(&bytes)
+            .map_err(|e| DataError::corrupt(&self.path, format!("segment {id} {e}")))
     }
 
     /// Verifies every segment's checksum (and parses every geometry segment).
