@@ -25,6 +25,8 @@ enum Command {
     Inspect(cmd::inspect::Args),
     /// Check the stored visibility against the occluders by casting random rays.
     Verify(cmd::verify::Args),
+    /// Compare visibility culling methods over random views (Funkhouser Table 4.1).
+    Cull(cmd::cull::Args),
 }
 
 fn main() -> ExitCode {
@@ -41,6 +43,7 @@ fn main() -> ExitCode {
         Command::Build(a) => cmd::build::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Verify(a) => cmd::verify::run(a),
+        Command::Cull(a) => cmd::cull::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -29,25 +29,28 @@ impl Bars {
         );
         bar.set_prefix(name.to_string());
         if let Ok(mut slot) = self.bar.lock()
-            && let Some(old) = slot.replace(bar) {
-                old.finish();
-            }
+            && let Some(old) = slot.replace(bar)
+        {
+            old.finish();
+        }
     }
 
     /// Advances the current bar.
     pub fn inc(&self, n: u64) {
         if let Ok(slot) = self.bar.lock()
-            && let Some(b) = slot.as_ref() {
-                b.inc(n);
-            }
+            && let Some(b) = slot.as_ref()
+        {
+            b.inc(n);
+        }
     }
 
     /// Finishes the current bar.
     pub fn finish(&self) {
         if let Ok(mut slot) = self.bar.lock()
-            && let Some(b) = slot.take() {
-                b.finish();
-            }
+            && let Some(b) = slot.take()
+        {
+            b.finish();
+        }
     }
 }
 

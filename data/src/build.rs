@@ -5,10 +5,10 @@
 //! written in order, so the same input always gives the same file.
 
 use crate::bake::bake;
-use crate::error::Result;
-use crate::format::writer::{DbWriter, WriteSummary};
 use crate::cells::occluders::occluder_boxes;
 use crate::cells::{CellStats, precompute};
+use crate::error::Result;
+use crate::format::writer::{DbWriter, WriteSummary};
 use crate::format::{
     CellIndex, Header, InstanceRecord, LodRecord, ObjectRecord, SegmentKind, encode_segment,
 };
@@ -100,7 +100,9 @@ pub fn build(
     let cells = if opts.no_cells {
         None
     } else {
-        Some(write_cells(&mut w, &lods, &instances, &records, &bounds, obs)?)
+        Some(write_cells(
+            &mut w, &lods, &instances, &records, &bounds, obs,
+        )?)
     };
     let cell_stats = cells.as_ref().map(|c| c.stats.clone());
     let name = opts.name.clone().unwrap_or_else(|| {
@@ -144,9 +146,13 @@ fn write_cells(
     }));
     let objects: Vec<Aabb> = records.iter().map(|r| r.bounds).collect();
     obs.stage("cells", 1);
-    let pre = precompute(bounds, &occluders, &objects, &|name, n| obs.stage(name, n), &|| {
-        obs.advance(1)
-    });
+    let pre = precompute(
+        bounds,
+        &occluders,
+        &objects,
+        &|name, n| obs.stage(name, n),
+        &|| obs.advance(1),
+    );
     let graph_segment = w.add_segment(SegmentKind::CellGraph, &encode_segment(&pre.graph))?;
     let occluder_segment = w.add_segment(SegmentKind::Occluders, &encode_segment(&occluders))?;
     let stab_segments = pre

@@ -188,7 +188,10 @@ impl DbStats {
                 c.subdivision_seconds,
                 c.visibility_seconds
             ));
-            s.push_str(&format!("\n  {:<28} {:>10} {:>8}\n", "per live cell", "mean", "max"));
+            s.push_str(&format!(
+                "\n  {:<28} {:>10} {:>8}\n",
+                "per live cell", "mean", "max"
+            ));
             for (name, (mean, max)) in [
                 ("portals", c.portals_per_cell),
                 ("objects completely inside", c.objects_inside),

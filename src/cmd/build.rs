@@ -71,7 +71,11 @@ pub fn run(a: Args) -> Result<()> {
             c.occluder_boxes,
             c.subdivision_seconds,
             c.visibility_seconds,
-            if c.grid_fallback { " (no occluders: grid fallback)" } else { "" },
+            if c.grid_fallback {
+                " (no occluders: grid fallback)"
+            } else {
+                ""
+            },
         );
     }
     Ok(())

@@ -175,3 +175,87 @@ fn polygon_area(poly: &[Vec3]) -> f32 {
     }
     n.length() * 0.5
 }
+
+/// One row of a Funkhouser Table 4.1-style comparison: (mean, max) per view.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct CullRow {
+    /// The culling method.
+    pub method: String,
+    /// Cells kept (mean, max).
+    pub cells: (f64, u64),
+    /// Objects kept (mean, max).
+    pub objects: (f64, u64),
+    /// Polygons of the kept objects at their highest LOD (mean, max).
+    pub polygons: (f64, u64),
+}
+
+/// What one method kept in one view: cells, and the objects.
+type Kept = (u64, Vec<u32>);
+
+/// Compares no culling, frustum culling (FTC/FTO), cell-to-object visibility of the eye's cell
+/// (CTO), CTO within the frustum, and eye-to-cell/eye-to-object (ETC/ETO) over a set of views.
+/// `stabs` are the stab lists of every cell; `polygons` the highest-LOD triangles per object.
+pub fn compare_culling(
+    graph: &CellGraph,
+    stabs: &[StabList],
+    objects: &[Aabb],
+    polygons: &[u64],
+    views: &[Frustum],
+) -> Vec<CullRow> {
+    let live: Vec<u32> = (0..graph.cells.len() as u32)
+        .filter(|&c| graph.cells[c as usize].live)
+        .collect();
+    let all: Vec<u32> = (0..objects.len() as u32).collect();
+    let mut rows: Vec<(&str, Vec<Kept>)> = vec![
+        ("none", Vec::new()),
+        ("frustum (FTC, FTO)", Vec::new()),
+        ("cell-to-object (CTO)", Vec::new()),
+        ("CTO within frustum", Vec::new()),
+        ("eye-to-object (ETC, ETO)", Vec::new()),
+    ];
+    for view in views {
+        let Some(eye_cell) = graph.locate(view.eye) else {
+            continue;
+        };
+        let stab = &stabs[eye_cell as usize];
+        let cto = stab.objects();
+        let fto = frustum_to_object(objects, view);
+        let cto_f: Vec<u32> = cto
+            .iter()
+            .copied()
+            .filter(|&o| view.touches(&objects[o as usize]))
+            .collect();
+        let reached = eye_to_cell(graph, view);
+        let eto = eye_to_object(&reached, stab, objects);
+        let stab_cells = stab.entries.len() as u64;
+        let cto_f_cells = stab
+            .entries
+            .iter()
+            .filter(|e| view.touches(&e.region))
+            .count() as u64;
+        rows[0].1.push((live.len() as u64, all.clone()));
+        rows[1]
+            .1
+            .push((frustum_to_cell(graph, view).len() as u64, fto));
+        rows[2].1.push((stab_cells, cto));
+        rows[3].1.push((cto_f_cells, cto_f));
+        rows[4].1.push((reached.len() as u64, eto));
+    }
+    rows.into_iter()
+        .map(|(name, per_view)| {
+            let mm = |f: &dyn Fn(&Kept) -> u64| -> (f64, u64) {
+                let v: Vec<u64> = per_view.iter().map(f).collect();
+                (
+                    v.iter().sum::<u64>() as f64 / v.len().max(1) as f64,
+                    v.iter().copied().max().unwrap_or(0),
+                )
+            };
+            CullRow {
+                method: name.to_string(),
+                cells: mm(&|(c, _)| *c),
+                objects: mm(&|(_, o)| o.len() as u64),
+                polygons: mm(&|(_, o)| o.iter().map(|&i| polygons[i as usize]).sum()),
+            }
+        })
+        .collect()
+}

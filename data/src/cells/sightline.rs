@@ -150,7 +150,11 @@ fn exists_by_microlp(portals: &[(&Portal, f32)]) -> bool {
     for (p, dir) in portals {
         for (d, m) in oriented_edges(p, *dir) {
             let coeffs = [m.x, m.y, m.z, d.x, d.y, d.z];
-            let expr: Vec<_> = vars.iter().zip(coeffs).map(|(&v, c)| (v, c as f64)).collect();
+            let expr: Vec<_> = vars
+                .iter()
+                .zip(coeffs)
+                .map(|(&v, c)| (v, c as f64))
+                .collect();
             lp.add_constraint(expr, ComparisonOp::Ge, 1.0);
         }
     }
@@ -231,7 +235,7 @@ mod tests {
                 min[a] = i as f32 * 2.0; max[a] = min[a];
                 min[u] = u0 as f32; max[u] = (u0 + du) as f32;
                 min[v] = v0 as f32; max[v] = (v0 + dv) as f32;
-                Portal { axis: axis, rect: Aabb { min, max }, cells: [0, 1] }
+                Portal { axis, rect: Aabb { min, max }, cells: [0, 1] }
             }).collect();
             let seq: Vec<(&Portal, f32)> = portals.iter().zip(&spec).map(|(p, s)| (p, if s.1 >= 0 { 1.0 } else { -1.0 })).collect();
             let ours = exists(&seq);

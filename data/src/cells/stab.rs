@@ -63,10 +63,16 @@ pub fn all_stab_lists(
     let mut lists: Vec<StabList> = (0..graph.cells.len() as u32)
         .into_par_iter()
         .map(|c| {
-            let s = if graph.cells[c as usize].live {
-                stab_list(graph, objects, &incident, c)
-            } else {
+            let s = if !graph.cells[c as usize].live {
                 StabList::default()
+            } else if graph.grid_fallback {
+                // No occluders at all: everything connected is visible, exactly.
+                StabList {
+                    fallback: false,
+                    ..fallback(graph, &incident, c)
+                }
+            } else {
+                stab_list(graph, objects, &incident, c)
             };
             on_cell();
             s

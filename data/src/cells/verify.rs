@@ -1,6 +1,7 @@
 //! `portico verify`: checks the stored visibility against the real occluders by ray casting.
 //!
-//! Rays start at random points of random live cells and go in random directions. A ray stops at
+//! Rays start at random points of up to [`CELLS_SAMPLED`] random live cells, the same number
+//! from each, and go in random directions. A ray stops at
 //! the first occluder box it enters (or where it leaves the subdivision); every object whose box
 //! it enters before that is visible from the start cell, and must be in that cell's stored
 //! cell-to-object set — otherwise it is a false negative (must be 0). The overestimate ratio
@@ -15,6 +16,9 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet};
+
+/// Most source cells sampled; the rays are shared among them, so each gets many.
+pub const CELLS_SAMPLED: usize = 256;
 
 /// What `verify` found.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -58,11 +62,16 @@ pub fn verify(
             ray_visible_mean: 0.0,
         };
     }
+    let mut pick = ChaCha8Rng::seed_from_u64(seed);
+    let sampled: Vec<u32> =
+        rand::seq::IndexedRandom::choose_multiple(&live[..], &mut pick, CELLS_SAMPLED)
+            .copied()
+            .collect();
     let seen: Vec<(u32, Vec<u32>)> = (0..rays)
         .into_par_iter()
         .map(|i| {
             let mut rng = ChaCha8Rng::seed_from_u64(seed ^ i.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-            let cell = live[rng.random_range(0..live.len())];
+            let cell = sampled[i as usize % sampled.len()];
             let b = &graph.cells[cell as usize].bounds;
             let origin = Vec3::from(std::array::from_fn::<f32, 3, _>(|k| {
                 b.min[k] + (b.max[k] - b.min[k]) * rng.random_range(0.001f32..0.999)

@@ -8,13 +8,13 @@
 //! send to a socket. The file must not be truncated in place while mapped (SIGBUS); rebuilds
 //! rename a new file over it instead (see `writer`).
 
+use super::decode_segment;
 use super::{
     FORMAT_VERSION, Header, LodRecord, MAGIC, PROLOGUE_SIZE, Prologue, SEGMENT_ALIGN, SegmentEntry,
     SegmentKind, bincode_config, checksum, segment_flags,
 };
-use crate::error::{DataError, Result};
-use super::decode_segment;
 use crate::cells::{CellGraph, StabList};
+use crate::error::{DataError, Result};
 use crate::geometry::{Aabb, GeometryView};
 use bytes::Bytes;
 use std::fs::File;
@@ -139,7 +139,10 @@ impl Database {
         };
         let graph: CellGraph = self.structured(c.graph_segment)?;
         if graph.cells.len() != c.stab_segments.len() {
-            return Err(DataError::corrupt(&self.path, "cell graph and cell index disagree"));
+            return Err(DataError::corrupt(
+                &self.path,
+                "cell graph and cell index disagree",
+            ));
         }
         Ok(Some(graph))
     }

@@ -1,0 +1,244 @@
+//! Cells, portals and visibility: hand-built cases with known answers, the grid fallback, and
+//! property tests on a generated building (no ray-visible object is ever culled, eye-to-object
+//! ⊆ cell-to-object, eye-to-cell ⊆ cell-to-cell).
+
+use glam::Vec3;
+use portico_data::Database;
+use portico_data::build::{BuildOptions, Quiet, build};
+use portico_data::cells::realtime::{Frustum, eye_to_cell, eye_to_object};
+use portico_data::cells::verify::{cast, verify};
+use portico_data::cells::{CellGraph, StabList, precompute};
+use portico_data::geometry::Aabb;
+use portico_data::import::import_file;
+use proptest::prelude::*;
+use std::sync::OnceLock;
+
+fn bx(min: [f32; 3], max: [f32; 3]) -> Aabb {
+    Aabb { min, max }
+}
+
+/// The six faces of each box (what occluder extraction gives for box-shaped walls).
+fn faces_of(boxes: &[Aabb]) -> Vec<Aabb> {
+    let mut out = Vec::new();
+    for b in boxes {
+        for a in 0..3 {
+            for at in [b.min[a], b.max[a]] {
+                let mut f = *b;
+                f.min[a] = at;
+                f.max[a] = at;
+                out.push(f);
+            }
+        }
+    }
+    out
+}
+
+/// A wall across x at `x` (0.2 thick), z 0..10, y 0..3, with a door z in `door`, y < 2.1.
+fn wall_with_door(x: f32, door: (f32, f32)) -> Vec<Aabb> {
+    vec![
+        bx([x, 0.0, 0.0], [x + 0.2, 3.0, door.0]),
+        bx([x, 0.0, door.1], [x + 0.2, 3.0, 10.0]),
+        bx([x, 2.1, door.0], [x + 0.2, 3.0, door.1]),
+    ]
+}
+
+fn quiet_precompute(
+    bounds: &Aabb,
+    occluders: &[Aabb],
+    objects: &[Aabb],
+) -> (CellGraph, Vec<StabList>) {
+    let p = precompute(bounds, occluders, objects, &|_, _| {}, &|| {});
+    (p.graph, p.stabs)
+}
+
+#[test]
+fn rooms_behind_a_zigzag_of_doors_are_culled() {
+    // Rooms R0 | R1 | R2 | R3 along x; doors near z = 1, then z = 9, then z = 1 again.
+    let mut boxes = wall_with_door(4.0, (0.5, 1.5));
+    boxes.extend(wall_with_door(8.2, (8.5, 9.5)));
+    boxes.extend(wall_with_door(12.4, (0.5, 1.5)));
+    let occluders = faces_of(&boxes);
+    let objects = [
+        bx([1.0, 0.0, 4.0], [2.0, 1.0, 5.0]),   // 0: in R0
+        bx([6.0, 0.0, 4.0], [7.0, 1.0, 5.0]),   // 1: in R1
+        bx([8.5, 0.0, 9.5], [9.0, 1.0, 9.9]),   // 2: in R2, just past door 2
+        bx([10.0, 0.0, 4.0], [11.0, 1.0, 5.0]), // 3: in R2, out of the line of the doors
+        bx([14.0, 0.0, 9.0], [15.0, 1.0, 9.8]), // 4: in R3
+    ];
+    let bounds = bx([0.0, 0.0, 0.0], [16.6, 3.0, 10.0]);
+    let (g, stabs) = quiet_precompute(&bounds, &occluders, &objects);
+    let r0 = g.locate(Vec3::new(2.0, 1.0, 5.0)).unwrap();
+    let r2 = g.locate(Vec3::new(10.0, 1.0, 5.0)).unwrap();
+    let r3 = g.locate(Vec3::new(14.0, 1.0, 5.0)).unwrap();
+    let from_r0 = &stabs[r0 as usize];
+    let objs = from_r0.objects();
+    assert!(
+        objs.contains(&0) && objs.contains(&1) && objs.contains(&2),
+        "{objs:?}"
+    );
+    assert!(
+        !objs.contains(&3),
+        "R2's middle is out of the line of the two doors"
+    );
+    assert!(
+        !objs.contains(&4),
+        "object in R3 cannot be seen from R0 through the zigzag"
+    );
+    assert!(
+        from_r0.entry(r2).is_some(),
+        "R2 is visible from R0 through two doors"
+    );
+    assert!(
+        from_r0.entry(r3).is_none(),
+        "R3 is connected but not visible from R0"
+    );
+    // The neighbour's whole content is visible (Funkhouser's special case).
+    let r1 = g.locate(Vec3::new(6.0, 1.0, 5.0)).unwrap();
+    assert!(stabs[r1 as usize].objects().contains(&3));
+    let rep = verify(&g, &stabs, &occluders, &objects, 20_000, 7);
+    assert_eq!(rep.false_negatives, 0, "{rep:?}");
+    assert!(!stabs.iter().any(|s| s.fallback));
+}
+
+#[test]
+fn two_rooms_and_a_door_see_each_other() {
+    let occluders = faces_of(&wall_with_door(4.0, (4.0, 5.0)));
+    let objects = [
+        bx([1.0, 0.0, 1.0], [2.0, 1.0, 2.0]),
+        bx([7.0, 0.0, 8.0], [8.0, 1.0, 9.0]),
+    ];
+    let bounds = bx([0.0, 0.0, 0.0], [8.2, 3.0, 10.0]);
+    let (g, stabs) = quiet_precompute(&bounds, &occluders, &objects);
+    let a = g.locate(Vec3::new(1.0, 1.0, 1.0)).unwrap();
+    let b = g.locate(Vec3::new(7.0, 1.0, 9.0)).unwrap();
+    assert_ne!(a, b);
+    assert_eq!(stabs[a as usize].objects(), vec![0, 1]);
+    assert_eq!(stabs[b as usize].objects(), vec![0, 1]);
+    // The space inside the wall beside the door is dead.
+    let inside = g.locate(Vec3::new(4.1, 1.0, 8.0)).unwrap();
+    assert!(!g.cells[inside as usize].live);
+    // Looking away from the door, the eye sees only its own room.
+    let view = Frustum::new(Vec3::new(2.0, 1.5, 4.5), -Vec3::X, Vec3::Y, 0.5, 0.4);
+    let reached = eye_to_cell(&g, &view);
+    assert_eq!(reached.len(), 1);
+    // Looking at the door, it sees into the other room.
+    let view = Frustum::new(Vec3::new(2.0, 1.5, 4.5), Vec3::X, Vec3::Y, 0.5, 0.4);
+    let reached = eye_to_cell(&g, &view);
+    assert!(reached.iter().any(|r| r.cell == b), "{reached:?}");
+}
+
+#[test]
+fn a_model_without_occluders_falls_back_to_an_open_grid() {
+    let objects: Vec<Aabb> = (0..20)
+        .map(|i| {
+            let x = (i % 5) as f32 * 6.0;
+            let z = (i / 5) as f32 * 6.0;
+            bx([x, 0.0, z], [x + 1.0, 1.0, z + 1.0])
+        })
+        .collect();
+    let bounds = bx([0.0, 0.0, 0.0], [30.0, 3.0, 24.0]);
+    let (g, stabs) = quiet_precompute(&bounds, &[], &objects);
+    assert!(g.grid_fallback);
+    assert!(g.cells.len() >= 8);
+    // All open: every cell sees every object.
+    for (c, s) in stabs.iter().enumerate() {
+        assert_eq!(s.objects().len(), objects.len(), "cell {c}");
+    }
+    assert_eq!(
+        verify(&g, &stabs, &[], &objects, 2_000, 1).false_negatives,
+        0
+    );
+}
+
+/// The tiny generated building, built once for all property tests.
+fn tiny() -> &'static (CellGraph, Vec<StabList>, Vec<Aabb>, Vec<Aabb>) {
+    static DB: OnceLock<(CellGraph, Vec<StabList>, Vec<Aabb>, Vec<Aabb>)> = OnceLock::new();
+    DB.get_or_init(|| {
+        let params = portico_generator::Params {
+            preset: portico_generator::Preset::Tiny,
+            seed: 3,
+            floors: Some(2),
+        };
+        let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
+        let dir = tempfile::tempdir().unwrap();
+        let glb = dir.path().join("tiny.glb");
+        std::fs::write(&glb, &b.glb).unwrap();
+        let out = dir.path().join("tiny.portico");
+        build(
+            import_file(&glb).unwrap(),
+            &out,
+            &BuildOptions::default(),
+            &Quiet,
+        )
+        .unwrap();
+        let db = Database::open(&out).unwrap();
+        let g = db.cell_graph().unwrap().expect("cells");
+        let stabs = (0..g.cells.len() as u32)
+            .map(|c| db.stab_list(c).unwrap())
+            .collect();
+        let objects = db.header().instances.iter().map(|i| i.bounds).collect();
+        (g, stabs, db.occluders().unwrap(), objects)
+    })
+}
+
+#[test]
+fn the_generated_building_has_rooms_walls_and_no_false_negatives() {
+    let (g, stabs, occluders, objects) = tiny();
+    assert!(!g.grid_fallback);
+    assert!(g.live_cells() >= 10, "{} live cells", g.live_cells());
+    assert!(
+        g.cells.len() > g.live_cells(),
+        "walls and slabs should leave dead cells"
+    );
+    let rep = verify(g, stabs, occluders, objects, 20_000, 11);
+    assert_eq!(rep.false_negatives, 0, "{rep:?}");
+    assert!(rep.overestimate_ratio >= 1.0);
+    // Culling does something: the mean cell sees well under everything.
+    assert!(
+        rep.stored_objects_mean < objects.len() as f64 * 0.8,
+        "{rep:?}"
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+
+    /// From any eye in a live cell looking anywhere: eye-to-cell ⊆ cell-to-cell, eye-to-object
+    /// ⊆ cell-to-object, and every object a ray inside the frustum reaches is kept.
+    #[test]
+    fn eye_to_object_is_conservative_and_within_cell_to_object(
+        cell_pick in 0usize..10_000, fx in 0.05f32..0.95, fy in 0.05f32..0.95, fz in 0.05f32..0.95,
+        yaw in 0.0f32..6.283, pitch in -0.6f32..0.6, rays in proptest::collection::vec((-1.0f32..1.0, -1.0f32..1.0), 40)
+    ) {
+        let (g, stabs, occluders, objects) = tiny();
+        let live: Vec<u32> = (0..g.cells.len() as u32).filter(|&c| g.cells[c as usize].live).collect();
+        let cell = live[cell_pick % live.len()];
+        let b = g.cells[cell as usize].bounds;
+        let eye = Vec3::new(
+            b.min[0] + (b.max[0] - b.min[0]) * fx,
+            b.min[1] + (b.max[1] - b.min[1]) * fy,
+            b.min[2] + (b.max[2] - b.min[2]) * fz,
+        );
+        prop_assume!(g.locate(eye) == Some(cell));
+        let dir = Vec3::new(yaw.cos() * pitch.cos(), pitch.sin(), yaw.sin() * pitch.cos());
+        let (hx, hy) = (0.6f32, 0.45f32);
+        let view = Frustum::new(eye, dir, Vec3::Y, hx, hy);
+        let reached = eye_to_cell(g, &view);
+        let stab = &stabs[cell as usize];
+        for r in &reached {
+            prop_assert!(stab.entry(r.cell).is_some(), "eye reaches cell {} not in the stab list", r.cell);
+        }
+        let eto = eye_to_object(&reached, stab, objects);
+        let cto = stab.objects();
+        prop_assert!(eto.iter().all(|o| cto.binary_search(o).is_ok()));
+        let f = dir.normalize();
+        let right = f.cross(Vec3::Y).normalize();
+        let up = right.cross(f);
+        for (u, v) in rays {
+            let d = (f + right * (u * hx.tan() * 0.98) + up * (v * hy.tan() * 0.98)).normalize();
+            for o in cast(eye, d, &g.bounds, occluders, objects) {
+                prop_assert!(eto.binary_search(&o).is_ok(), "object {o} seen by a ray but culled");
+            }
+        }
+    }
+}
