@@ -5,7 +5,7 @@
 //! written in order, so the same input always gives the same file.
 
 use crate::bake::bake;
-use crate::cells::occluders::occluder_boxes;
+use crate::cells::occluders::{Occluders, occluder_boxes};
 use crate::cells::{CellStats, precompute};
 use crate::error::Result;
 use crate::format::writer::{DbWriter, WriteSummary};
@@ -74,6 +74,16 @@ pub fn build(
         instances,
         sources,
     } = model;
+    // Occluders come from the source meshes, before LOD optimisation reorders their triangles.
+    let occluders = (!opts.no_cells).then(|| {
+        occluder_boxes(instances.iter().filter_map(|i| {
+            Some((
+                defs.get(i.def as usize)?.lods.first()?,
+                i.transform,
+                i.occluder,
+            ))
+        }))
+    });
     obs.stage("LODs", defs.len() as u64);
     let lods: Vec<(String, u32, Vec<LodMesh>)> = defs
         .into_par_iter()
@@ -97,12 +107,9 @@ pub fn build(
             .collect()
     };
     let bounds = records.iter().fold(Aabb::EMPTY, |b, r| b.union(&r.bounds));
-    let cells = if opts.no_cells {
-        None
-    } else {
-        Some(write_cells(
-            &mut w, &lods, &instances, &records, &bounds, obs,
-        )?)
+    let cells = match &occluders {
+        Some(occ) => Some(write_cells(&mut w, occ, &records, &bounds, obs)?),
+        None => None,
     };
     let cell_stats = cells.as_ref().map(|c| c.stats.clone());
     let name = opts.name.clone().unwrap_or_else(|| {
@@ -134,27 +141,23 @@ pub fn build(
 /// the occluders and one stab list per cell.
 fn write_cells(
     w: &mut DbWriter,
-    lods: &[(String, u32, Vec<LodMesh>)],
-    instances: &[Instance],
+    occluders: &Occluders,
     records: &[InstanceRecord],
     bounds: &Aabb,
     obs: &dyn Observer,
 ) -> Result<CellIndex> {
-    let occluders = occluder_boxes(instances.iter().filter_map(|i| {
-        let finest = &lods[i.def as usize].2.first()?.mesh;
-        Some((finest, i.transform, i.occluder))
-    }));
     let objects: Vec<Aabb> = records.iter().map(|r| r.bounds).collect();
     obs.stage("cells", 1);
     let pre = precompute(
         bounds,
-        &occluders,
+        occluders,
         &objects,
         &|name, n| obs.stage(name, n),
         &|| obs.advance(1),
     );
     let graph_segment = w.add_segment(SegmentKind::CellGraph, &encode_segment(&pre.graph))?;
-    let occluder_segment = w.add_segment(SegmentKind::Occluders, &encode_segment(&occluders))?;
+    let occluder_segment =
+        w.add_segment(SegmentKind::Occluders, &encode_segment(&occluders.faces))?;
     let stab_segments = pre
         .stabs
         .iter()

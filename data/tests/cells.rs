@@ -5,6 +5,7 @@
 use glam::Vec3;
 use portico_data::Database;
 use portico_data::build::{BuildOptions, Quiet, build};
+use portico_data::cells::occluders::Occluders;
 use portico_data::cells::realtime::{Frustum, eye_to_cell, eye_to_object};
 use portico_data::cells::verify::{cast, verify};
 use portico_data::cells::{CellGraph, StabList, precompute};
@@ -42,12 +43,13 @@ fn wall_with_door(x: f32, door: (f32, f32)) -> Vec<Aabb> {
     ]
 }
 
-fn quiet_precompute(
-    bounds: &Aabb,
-    occluders: &[Aabb],
-    objects: &[Aabb],
-) -> (CellGraph, Vec<StabList>) {
-    let p = precompute(bounds, occluders, objects, &|_, _| {}, &|| {});
+/// Precomputes with the boxes as solids and their faces as occluders.
+fn quiet_precompute(bounds: &Aabb, boxes: &[Aabb], objects: &[Aabb]) -> (CellGraph, Vec<StabList>) {
+    let occ = Occluders {
+        faces: faces_of(boxes),
+        solids: boxes.to_vec(),
+    };
+    let p = precompute(bounds, &occ, objects, &|_, _| {}, &|| {});
     (p.graph, p.stabs)
 }
 
@@ -66,7 +68,7 @@ fn rooms_behind_a_zigzag_of_doors_are_culled() {
         bx([14.0, 0.0, 9.0], [15.0, 1.0, 9.8]), // 4: in R3
     ];
     let bounds = bx([0.0, 0.0, 0.0], [16.6, 3.0, 10.0]);
-    let (g, stabs) = quiet_precompute(&bounds, &occluders, &objects);
+    let (g, stabs) = quiet_precompute(&bounds, &boxes, &objects);
     let r0 = g.locate(Vec3::new(2.0, 1.0, 5.0)).unwrap();
     let r2 = g.locate(Vec3::new(10.0, 1.0, 5.0)).unwrap();
     let r3 = g.locate(Vec3::new(14.0, 1.0, 5.0)).unwrap();
@@ -102,13 +104,13 @@ fn rooms_behind_a_zigzag_of_doors_are_culled() {
 
 #[test]
 fn two_rooms_and_a_door_see_each_other() {
-    let occluders = faces_of(&wall_with_door(4.0, (4.0, 5.0)));
+    let boxes = wall_with_door(4.0, (4.0, 5.0));
     let objects = [
         bx([1.0, 0.0, 1.0], [2.0, 1.0, 2.0]),
         bx([7.0, 0.0, 8.0], [8.0, 1.0, 9.0]),
     ];
     let bounds = bx([0.0, 0.0, 0.0], [8.2, 3.0, 10.0]);
-    let (g, stabs) = quiet_precompute(&bounds, &occluders, &objects);
+    let (g, stabs) = quiet_precompute(&bounds, &boxes, &objects);
     let a = g.locate(Vec3::new(1.0, 1.0, 1.0)).unwrap();
     let b = g.locate(Vec3::new(7.0, 1.0, 9.0)).unwrap();
     assert_ne!(a, b);
@@ -150,9 +152,12 @@ fn a_model_without_occluders_falls_back_to_an_open_grid() {
     );
 }
 
+/// A built building: cell graph, stab lists, occluder faces, object bounds.
+type Built = (CellGraph, Vec<StabList>, Vec<Aabb>, Vec<Aabb>);
+
 /// The tiny generated building, built once for all property tests.
-fn tiny() -> &'static (CellGraph, Vec<StabList>, Vec<Aabb>, Vec<Aabb>) {
-    static DB: OnceLock<(CellGraph, Vec<StabList>, Vec<Aabb>, Vec<Aabb>)> = OnceLock::new();
+fn tiny() -> &'static Built {
+    static DB: OnceLock<Built> = OnceLock::new();
     DB.get_or_init(|| {
         let params = portico_generator::Params {
             preset: portico_generator::Preset::Tiny,
@@ -208,7 +213,7 @@ proptest! {
     #[test]
     fn eye_to_object_is_conservative_and_within_cell_to_object(
         cell_pick in 0usize..10_000, fx in 0.05f32..0.95, fy in 0.05f32..0.95, fz in 0.05f32..0.95,
-        yaw in 0.0f32..6.283, pitch in -0.6f32..0.6, rays in proptest::collection::vec((-1.0f32..1.0, -1.0f32..1.0), 40)
+        yaw in 0.0f32..std::f32::consts::TAU, pitch in -0.6f32..0.6, rays in proptest::collection::vec((-1.0f32..1.0, -1.0f32..1.0), 40)
     ) {
         let (g, stabs, occluders, objects) = tiny();
         let live: Vec<u32> = (0..g.cells.len() as u32).filter(|&c| g.cells[c as usize].live).collect();

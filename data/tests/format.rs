@@ -96,7 +96,7 @@ fn built(dir: &Path, flatten: bool) -> std::path::PathBuf {
         &path,
         &BuildOptions {
             flatten,
-            name: None,
+            ..BuildOptions::default()
         },
         &Quiet,
     )

@@ -271,20 +271,20 @@ pub struct Precomputed {
 /// bounds. `on_cell` is called once per source cell done (for a progress bar).
 pub fn precompute(
     bounds: &Aabb,
-    occluders: &[Aabb],
+    occluders: &occluders::Occluders,
     objects: &[Aabb],
     on_stage: &(dyn Fn(&str, u64) + Sync),
     on_cell: &(dyn Fn() + Sync),
 ) -> Precomputed {
     let t0 = std::time::Instant::now();
-    let mut graph = subdivide::subdivide(bounds, occluders);
-    portals::find_portals(&mut graph, occluders);
+    let mut graph = subdivide::subdivide(bounds, &occluders.faces);
+    portals::find_portals(&mut graph, &occluders.faces, &occluders.solids);
     let incidence = stab::incidence(&graph, objects);
     let subdivision_seconds = t0.elapsed().as_secs_f64();
     let t1 = std::time::Instant::now();
     on_stage("visibility", graph.cells.len() as u64);
     let stabs = stab::all_stab_lists(&graph, objects, incidence, on_cell);
-    let mut stats = stats(&graph, &stabs, occluders.len());
+    let mut stats = stats(&graph, &stabs, occluders.faces.len());
     stats.subdivision_seconds = subdivision_seconds;
     stats.visibility_seconds = t1.elapsed().as_secs_f64();
     Precomputed {

@@ -10,6 +10,11 @@
 //!
 //! Untagged models (any imported file) get automatic occluders: faces of any instance with both
 //! extents at least [`AUTO_MIN_EXTENT`] — slabs and walls.
+//!
+//! Solid volume matters too: the space inside a wall is cut into cells by the planes of other
+//! walls, and those cells must be dead, not joined to each other by "portals" inside the
+//! solid. Runs of 12 consecutive triangles that exactly cover a box's surface (how the
+//! generator, and most box modellers, write boxes) give the solid boxes ([`solid_boxes`]).
 
 use crate::geometry::{Aabb, Mesh};
 use glam::{Mat4, Vec3};
@@ -61,6 +66,53 @@ pub fn faces(mesh: &Mesh) -> Vec<Aabb> {
     out
 }
 
+/// Boxes written as 12 consecutive triangles covering exactly a box's surface: solid volume.
+pub fn solid_boxes(mesh: &Mesh) -> Vec<Aabb> {
+    let tris: Vec<[Vec3; 3]> = mesh
+        .indices
+        .chunks_exact(3)
+        .map(|t| [t[0], t[1], t[2]].map(|i| Vec3::from(mesh.vertices[i as usize].position)))
+        .collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i + 12 <= tris.len() {
+        match as_box(&tris[i..i + 12]) {
+            Some(b) => {
+                out.push(b);
+                i += 12;
+            }
+            None => i += 1,
+        }
+    }
+    out
+}
+
+/// The bounds of a set of triangles if they are exactly that box's surface.
+fn as_box(tris: &[[Vec3; 3]]) -> Option<Aabb> {
+    let mut b = Aabb::EMPTY;
+    for p in tris.iter().flatten() {
+        b.include(*p);
+    }
+    let size = b.size();
+    if size.min_element() <= 0.0 {
+        return None;
+    }
+    let mut area = 0.0f64;
+    for t in tris {
+        let on_face = (0..3).any(|a| {
+            [b.min[a], b.max[a]]
+                .iter()
+                .any(|&f| t.iter().all(|p| (p[a] - f).abs() <= SNAP))
+        });
+        if !on_face {
+            return None;
+        }
+        area += ((t[1] - t[0]).cross(t[2] - t[0]).length() * 0.5) as f64;
+    }
+    let surface = 2.0 * (size.x * size.y + size.y * size.z + size.z * size.x) as f64;
+    ((area - surface).abs() <= surface * 0.01).then_some(b)
+}
+
 /// The world box of a local box, if `m` keeps boxes axis-aligned (scale, 90° turns, shift).
 pub fn transform_box(b: &Aabb, m: &Mat4) -> Option<Aabb> {
     let cols = [
@@ -85,21 +137,35 @@ fn snap(x: f32) -> f32 {
     (x / SNAP).round() * SNAP
 }
 
-/// World occluder faces for a set of instances, given as (finest mesh, transform, tagged).
-/// When nothing is tagged, large faces of every instance are used.
+/// The occluders of a model in world space.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Occluders {
+    /// Axis-aligned occluding faces (flat boxes): what the subdivision splits along.
+    pub faces: Vec<Aabb>,
+    /// Solid boxes (walls, slabs): cells inside them are dead.
+    pub solids: Vec<Aabb>,
+}
+
+/// World occluders for a set of instances, given as (finest mesh in its source triangle order,
+/// transform, tagged). When nothing is tagged, large faces of every instance are used (and no
+/// solids: an untagged box may be furniture, not a wall).
 pub fn occluder_boxes<'a>(
     instances: impl Iterator<Item = (&'a Mesh, Mat4, bool)> + Clone,
-) -> Vec<Aabb> {
+) -> Occluders {
     let any_tagged = instances.clone().any(|(_, _, tagged)| tagged);
+    let mut solids = Vec::new();
     let mut out = Vec::new();
-    let mut cache: HashMap<*const Mesh, Vec<Aabb>> = HashMap::new();
+    let mut cache: HashMap<*const Mesh, (Vec<Aabb>, Vec<Aabb>)> = HashMap::new();
     for (mesh, m, tagged) in instances {
         if any_tagged && !tagged {
             continue;
         }
-        let pieces = cache
+        let (pieces, boxes) = cache
             .entry(mesh as *const Mesh)
-            .or_insert_with(|| faces(mesh));
+            .or_insert_with(|| (faces(mesh), solid_boxes(mesh)));
+        if any_tagged {
+            solids.extend(boxes.iter().filter_map(|b| transform_box(b, &m)));
+        }
         for p in pieces.iter() {
             let Some(w) = transform_box(p, &m) else {
                 continue;
@@ -118,7 +184,7 @@ pub fn occluder_boxes<'a>(
             .unwrap_or(std::cmp::Ordering::Equal)
     });
     out.dedup();
-    out
+    Occluders { faces: out, solids }
 }
 
 #[cfg(test)]
@@ -142,6 +208,11 @@ mod tests {
         assert_eq!(found.len(), 18, "{found:?}");
         assert!(found.iter().all(|f| f.size().min_element() == 0.0));
         // The door opening (x 1..2, y < 2.1) is not covered by any face in the wall's planes.
+        let mut solids = solid_boxes(&mesh);
+        solids.sort_by(|a, b| a.min.partial_cmp(&b.min).unwrap());
+        let mut expected = parts.to_vec();
+        expected.sort_by(|a, b| a.min.partial_cmp(&b.min).unwrap());
+        assert_eq!(solids, expected);
         assert!(!found.iter().any(|f| f.min[2] == 0.0
             && f.max[2] == 0.0
             && f.min[0] < 1.5

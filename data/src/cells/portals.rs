@@ -15,11 +15,19 @@ const BUCKET: f32 = 4.0;
 /// Ignore open slivers smaller than this (square metres).
 const MIN_AREA: f32 = 1e-6;
 
-/// Fills `graph.portals` and every live cell's portal list.
-pub fn find_portals(graph: &mut CellGraph, occluders: &[Aabb]) {
+/// Fills `graph.portals` and every live cell's portal list. Cells inside the `solids` are dead
+/// and get no portals; so do cells left without any.
+pub fn find_portals(graph: &mut CellGraph, occluders: &[Aabb], solids: &[Aabb]) {
     let lookup = Buckets::new(occluders);
+    let solid_lookup = Buckets::new(solids);
+    for cell in &mut graph.cells {
+        cell.live = !inside_solids(&cell.bounds, &solid_lookup, solids);
+    }
     let mut portals = Vec::new();
     for c in 0..graph.cells.len() {
+        if !graph.cells[c].live {
+            continue;
+        }
         let b = graph.cells[c].bounds;
         for axis in 0..3 {
             let at = b.max[axis];
@@ -28,7 +36,7 @@ pub fn find_portals(graph: &mut CellGraph, occluders: &[Aabb]) {
             let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
             for n in graph.cells_touching(&face) {
                 let nb = graph.cells[n as usize].bounds;
-                if (nb.min[axis] - at).abs() > 1e-5 {
+                if !graph.cells[n as usize].live || (nb.min[axis] - at).abs() > 1e-5 {
                     continue;
                 }
                 let mut shared = face;
@@ -66,9 +74,32 @@ pub fn find_portals(graph: &mut CellGraph, occluders: &[Aabb]) {
     // sealed space (inside a wall or slab).
     if graph.cells.len() > 1 {
         for cell in &mut graph.cells {
-            cell.live = !cell.portals.is_empty();
+            cell.live &= !cell.portals.is_empty();
         }
     }
+}
+
+/// Whether the box lies inside the union of the solids: its centre and its corners (pulled 10 %
+/// towards the centre) each inside some solid.
+fn inside_solids(b: &Aabb, lookup: &Buckets, solids: &[Aabb]) -> bool {
+    let near = lookup.near(b, solids);
+    if near.is_empty() {
+        return false;
+    }
+    let c = b.center();
+    let inside = |p: glam::Vec3| {
+        near.iter()
+            .any(|s| (0..3).all(|k| s.min[k] - 1e-5 <= p[k] && p[k] <= s.max[k] + 1e-5))
+    };
+    inside(c)
+        && (0..8).all(|i| {
+            let corner = glam::Vec3::new(
+                if i & 1 == 0 { b.min[0] } else { b.max[0] },
+                if i & 2 == 0 { b.min[1] } else { b.max[1] },
+                if i & 4 == 0 { b.min[2] } else { b.max[2] },
+            );
+            inside(c + (corner - c) * 0.9)
+        })
 }
 
 /// The parts of `rect` (flat along `axis`) not covered by the blockers' projections, as
@@ -202,7 +233,7 @@ mod tests {
             bx([5.0, 2.0, 1.0], [5.2, 3.0, 2.0]),
         ]);
         let mut g = subdivide(&bx([0.0; 3], [10.0, 3.0, 4.0]), &walls);
-        find_portals(&mut g, &walls);
+        find_portals(&mut g, &walls, &[]);
         let door = g.locate(glam::Vec3::new(5.1, 1.0, 1.5)).unwrap();
         let left = g.locate(glam::Vec3::new(2.0, 1.0, 2.0)).unwrap();
         let right = g.locate(glam::Vec3::new(8.0, 1.0, 2.0)).unwrap();

@@ -14,30 +14,43 @@
 //! doubts and iteration limits, which keeps the precomputation conservative.
 
 use super::Portal;
-use glam::Vec3;
-/// Plücker coordinates (direction, moment) of the line from `a` to `b`.
-fn plucker(a: Vec3, b: Vec3) -> (Vec3, Vec3) {
-    (b - a, a.cross(b))
-}
-
-/// Permuted inner product of two lines given in Plücker coordinates.
-fn side(l1: (Vec3, Vec3), l2: (Vec3, Vec3)) -> f32 {
-    l1.0.dot(l2.1) + l2.0.dot(l1.1)
-}
-
-/// The four edges of a portal as Plücker lines, oriented so that lines crossing the portal in
-/// direction `dir` (+1 or -1 along its axis) have a positive side product with each.
-pub fn oriented_edges(p: &Portal, dir: f32) -> [(Vec3, Vec3); 4] {
-    let c = p.corners();
-    let mut edges = [0, 1, 2, 3].map(|i| plucker(c[i], c[(i + 1) % 4]));
-    let mut axis = Vec3::ZERO;
-    axis[p.axis as usize] = dir;
+use glam::{DVec3, Vec3};
+/// The four edges of a portal as Plücker lines `(direction, moment)` about `origin`, in f64,
+/// oriented so that lines crossing the portal in direction `dir` (+1 or -1 along its axis)
+/// have a positive side product with each. Corners are made relative to `origin` first: their
+/// differences are exact, while products at building coordinates in f32 are not.
+pub fn oriented_edges(p: &Portal, dir: f32, origin: Vec3) -> [(DVec3, DVec3); 4] {
+    let c = p.corners().map(|q| (q - origin).as_dvec3());
+    let mut edges = [0, 1, 2, 3].map(|i| (c[(i + 1) % 4] - c[i], c[i].cross(c[(i + 1) % 4])));
     let center = (c[0] + c[2]) * 0.5;
-    let probe = plucker(center - axis, center + axis);
+    let mut axis = DVec3::ZERO;
+    axis[p.axis as usize] = dir as f64;
+    let probe = (2.0 * axis, (center - axis).cross(center + axis));
     if side(probe, edges[0]) < 0.0 {
-        edges = [0, 1, 2, 3].map(|i| plucker(c[(i + 1) % 4], c[i]));
+        // Reversing a line negates both its direction and its moment.
+        edges = edges.map(|(d, m)| (-d, -m));
     }
     edges
+}
+
+/// Permuted inner product of two lines in Plücker coordinates.
+fn side(a: (DVec3, DVec3), b: (DVec3, DVec3)) -> f64 {
+    a.0.dot(b.1) + b.0.dot(a.1)
+}
+
+/// One inequality row per portal edge: `side(π, e) = π.d · e.m + e.d · π.m > 0`, linear in
+/// `π = (π.d, π.m)`; rows normalised to unit length.
+fn edge_rows(portals: &[(&Portal, f32)]) -> Vec<[f64; 6]> {
+    let origin = portals[0].0.rect.center();
+    portals
+        .iter()
+        .flat_map(|(p, dir)| oriented_edges(p, *dir, origin))
+        .filter_map(|(d, m)| {
+            let row = [m.x, m.y, m.z, d.x, d.y, d.z];
+            let norm = row.iter().map(|x| x * x).sum::<f64>().sqrt();
+            (norm > 0.0).then(|| row.map(|x| x / norm))
+        })
+        .collect()
 }
 
 /// Whether some line passes through every portal, each in its given direction.
@@ -46,22 +59,7 @@ pub fn exists(portals: &[(&Portal, f32)]) -> bool {
     if portals.len() < 2 {
         return true;
     }
-    // Work near the portals: Plücker moments depend on the origin, and small numbers keep the
-    // rows well conditioned.
-    let origin = portals[0].0.rect.center();
-    let mut rows: Vec<[f64; 6]> = Vec::with_capacity(portals.len() * 4);
-    for (p, dir) in portals {
-        for (d, m) in oriented_edges(p, *dir) {
-            // Shift the edge line by -origin: the moment becomes m - origin × d.
-            let m = m - origin.cross(d);
-            // side(π, e) = π.d · e.m + e.d · π.m, linear in π = (π.d, π.m).
-            let row = [m.x, m.y, m.z, d.x, d.y, d.z].map(f64::from);
-            let norm = row.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if norm > 0.0 {
-                rows.push(row.map(|x| x / norm));
-            }
-        }
-    }
+    let rows = edge_rows(portals);
     !gordan_infeasible(&rows)
 }
 
@@ -89,11 +87,14 @@ pub fn gordan_infeasible(rows: &[[f64; 6]]) -> bool {
     let mut basis: Vec<usize> = (m..m + R).collect();
     for _ in 0..50 * (m + R) {
         // Phase-1 reduced cost of column j: sum over rows whose basic variable is artificial.
+        // (Artificial columns cost 1 themselves.)
         let reduced = |j: usize| -> f64 {
+            let cost = if j >= m { 1.0 } else { 0.0 };
             (0..R)
                 .filter(|&r| basis[r] >= m)
                 .map(|r| t[r * cols + j])
-                .sum()
+                .sum::<f64>()
+                - cost
         };
         let Some(enter) = (0..m + R).find(|&j| !basis.contains(&j) && reduced(j) > TOL) else {
             let objective: f64 = (0..R)
@@ -147,16 +148,9 @@ fn exists_by_microlp(portals: &[(&Portal, f32)]) -> bool {
     use microlp::{ComparisonOp, OptimizationDirection, Problem};
     let mut lp = Problem::new(OptimizationDirection::Minimize);
     let vars: Vec<_> = (0..6).map(|_| lp.add_var(0.0, (-1e4, 1e4))).collect();
-    for (p, dir) in portals {
-        for (d, m) in oriented_edges(p, *dir) {
-            let coeffs = [m.x, m.y, m.z, d.x, d.y, d.z];
-            let expr: Vec<_> = vars
-                .iter()
-                .zip(coeffs)
-                .map(|(&v, c)| (v, c as f64))
-                .collect();
-            lp.add_constraint(expr, ComparisonOp::Ge, 1.0);
-        }
+    for row in edge_rows(portals) {
+        let expr: Vec<_> = vars.iter().zip(row).map(|(&v, c)| (v, c)).collect();
+        lp.add_constraint(expr, ComparisonOp::Ge, 1e-3);
     }
     !matches!(lp.solve(), Err(microlp::Error::Infeasible))
 }
@@ -242,5 +236,37 @@ mod tests {
             let theirs = exists_by_microlp(&seq);
             proptest::prop_assert!(ours || !theirs, "simplex says no line, microlp found one");
         }
+    }
+}
+
+#[cfg(test)]
+mod regression {
+    use super::*;
+    use crate::geometry::Aabb;
+
+    fn pz(z: f32, x0: f32, x1: f32) -> Portal {
+        Portal {
+            axis: 2,
+            rect: Aabb {
+                min: [x0, 3.9500003, z],
+                max: [x1, 6.05, z],
+            },
+            cells: [0, 1],
+        }
+    }
+
+    /// Two doors across a corridor, each a thin cell with a portal on both faces (found on the
+    /// `mega` preset: a real ray passes, the first simplex said no).
+    #[test]
+    fn doors_across_a_corridor() {
+        let ps = [
+            pz(9.700001, 76.9, 77.9),
+            pz(9.5, 76.9, 77.9),
+            pz(7.3, 77.600006, 78.600006),
+            pz(7.1000004, 77.600006, 78.600006),
+        ];
+        let seq: Vec<(&Portal, f32)> = ps.iter().map(|p| (p, -1.0)).collect();
+        assert!(exists_by_microlp(&seq), "microlp");
+        assert!(exists(&seq), "simplex");
     }
 }

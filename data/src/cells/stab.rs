@@ -224,7 +224,7 @@ impl Search<'_> {
 /// Halfspaces bounding what is visible beyond the last portal of a sequence: beyond its plane,
 /// and on the far side of every plane separating an earlier portal from it. `None` when the
 /// last portal faces back (nothing beyond it can be reached).
-fn region_planes(seq: &[(&Portal, f32)]) -> Option<Vec<Plane>> {
+pub fn region_planes(seq: &[(&Portal, f32)]) -> Option<Vec<Plane>> {
     let &(last, dir) = seq.last()?;
     let a = last.axis as usize;
     let mut n = Vec3::ZERO;

@@ -1,0 +1,168 @@
+//! End-to-end tests of the `portico` command line on the `tiny` preset: generate → build →
+//! inspect → verify → cull, and bad input giving one-line errors and no output file.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn portico(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_portico"))
+        .args(args)
+        .output()
+        .expect("run portico")
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = portico(args);
+    assert!(
+        out.status.success(),
+        "portico {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("utf-8")
+}
+
+/// Runs a command that must fail; returns its stderr (checked to be one `error:` line).
+fn fails(args: &[&str]) -> String {
+    let out = portico(args);
+    assert!(!out.status.success(), "portico {args:?} should fail");
+    let err = String::from_utf8_lossy(&out.stderr).trim().to_string();
+    assert!(err.starts_with("error: "), "{err}");
+    assert_eq!(err.lines().count(), 1, "not one line: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    err
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+fn generated(dir: &Path) -> PathBuf {
+    let glb = dir.join("tiny.glb");
+    let _ = ok(&["generate", "--preset", "tiny", "--seed", "5", "-o", s(&glb)]);
+    glb
+}
+
+#[test]
+fn generate_build_inspect_verify_cull() {
+    let dir = tempfile::tempdir().unwrap();
+    let glb = generated(dir.path());
+    let db = dir.path().join("tiny.portico");
+    let _ = ok(&["build", s(&glb), "-o", s(&db)]);
+    let stats: serde_json::Value =
+        serde_json::from_str(&ok(&["inspect", s(&db), "--json", "--verify"])).unwrap();
+    for key in [
+        "objects",
+        "instances",
+        "triangles_highest",
+        "triangles_all_lods",
+        "segments",
+        "file_bytes",
+        "cells",
+        "portals",
+    ] {
+        assert!(
+            stats[key].as_u64().unwrap_or(0) > 0,
+            "{key} missing or zero: {stats}"
+        );
+    }
+    assert!(stats["triangles_all_lods"].as_u64() > stats["triangles_highest"].as_u64());
+    assert_eq!(
+        stats["file_bytes"].as_u64(),
+        Some(std::fs::metadata(&db).unwrap().len())
+    );
+    let table = stats["lod_table"].as_array().unwrap();
+    assert_eq!(table.last().unwrap()["level"], "all");
+    let verify: serde_json::Value =
+        serde_json::from_str(&ok(&["verify", s(&db), "--rays", "5000", "--json"])).unwrap();
+    assert_eq!(verify["false_negatives"], 0, "{verify}");
+    let cull: serde_json::Value =
+        serde_json::from_str(&ok(&["cull", s(&db), "--views", "50", "--json"])).unwrap();
+    let rows = cull.as_array().unwrap();
+    let objects = |i: usize| rows[i]["objects"][0].as_f64().unwrap();
+    assert!(
+        objects(4) <= objects(2) && objects(2) <= objects(0),
+        "{cull}"
+    );
+
+    // Flattened: same instances, more bytes, every instance has its own geometry.
+    let flat = dir.path().join("flat.portico");
+    let _ = ok(&[
+        "build",
+        s(&glb),
+        "-o",
+        s(&flat),
+        "--flatten",
+        "--threads",
+        "1",
+    ]);
+    let fstats: serde_json::Value =
+        serde_json::from_str(&ok(&["inspect", s(&flat), "--json"])).unwrap();
+    assert_eq!(fstats["instances"], stats["instances"]);
+    assert_eq!(fstats["flattened"], true);
+    assert!(fstats["file_bytes"].as_u64() > stats["file_bytes"].as_u64());
+    assert_eq!(fstats["triangles_highest"], stats["triangles_highest"]);
+}
+
+#[test]
+fn generate_is_deterministic() {
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    assert_eq!(
+        std::fs::read(generated(a.path())).unwrap(),
+        std::fs::read(generated(b.path())).unwrap()
+    );
+}
+
+#[test]
+fn bad_input_is_one_clear_line_and_leaves_nothing_behind() {
+    let dir = tempfile::tempdir().unwrap();
+    let glb = generated(dir.path());
+    let good = dir.path().join("good.portico");
+    let _ = ok(&["build", s(&glb), "-o", s(&good), "--no-cells"]);
+    let bytes = std::fs::read(&good).unwrap();
+
+    let missing = dir.path().join("missing.portico");
+    assert!(fails(&["inspect", s(&missing)]).contains("missing.portico"));
+
+    let truncated = dir.path().join("truncated.portico");
+    std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
+    assert!(fails(&["inspect", s(&truncated)]).contains("truncated"));
+
+    let corrupt = dir.path().join("corrupt.portico");
+    let mut c = bytes.clone();
+    let at = c.len() - 20; // inside the segment index
+    c[at] ^= 0xff;
+    std::fs::write(&corrupt, &c).unwrap();
+    assert!(fails(&["inspect", s(&corrupt)]).contains("corrupt"));
+
+    assert!(fails(&["inspect", s(&glb)]).contains("not a Portico display database"));
+    assert!(fails(&["verify", s(&good)]).contains("without cells"));
+
+    // Broken models: the build fails and writes no output.
+    let broken_obj = dir.path().join("broken.obj");
+    std::fs::write(&broken_obj, "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n").unwrap();
+    let broken_gltf = dir.path().join("missing_buffer.gltf");
+    std::fs::write(
+        &broken_gltf,
+        r#"{"asset":{"version":"2.0"},"buffers":[{"uri":"nowhere.bin","byteLength":36}],
+            "bufferViews":[{"buffer":0,"byteLength":36}],
+            "accessors":[{"bufferView":0,"componentType":5126,"count":3,"type":"VEC3","min":[0,0,0],"max":[1,1,0]}],
+            "meshes":[{"primitives":[{"attributes":{"POSITION":0}}]}],
+            "nodes":[{"mesh":0}],"scenes":[{"nodes":[0]}],"scene":0}"#,
+    )
+    .unwrap();
+    for model in [&broken_obj, &broken_gltf] {
+        let out = dir.path().join("out.portico");
+        let err = fails(&["build", s(model), "-o", s(&out)]);
+        assert!(
+            err.contains(model.file_name().unwrap().to_str().unwrap()),
+            "{err}"
+        );
+        assert!(!out.exists(), "{} left an output file", model.display());
+    }
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
+}
