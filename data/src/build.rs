@@ -56,8 +56,12 @@ pub struct BuildReport {
     pub lod_time: Duration,
     /// Time spent encoding and writing geometry and the header.
     pub write_time: Duration,
-    /// Cell statistics (with subdivision and visibility times), when cells were built.
+    /// Cell statistics, when cells were built.
     pub cells: Option<CellStats>,
+    /// Seconds spent on the cell subdivision (0 without cells).
+    pub subdivision_seconds: f64,
+    /// Seconds spent on the visibility precomputation (0 without cells).
+    pub visibility_seconds: f64,
 }
 
 /// Builds a display database at `out` from an imported model.
@@ -107,8 +111,11 @@ pub fn build(
             .collect()
     };
     let bounds = records.iter().fold(Aabb::EMPTY, |b, r| b.union(&r.bounds));
+    let mut times = (0.0, 0.0);
     let cells = match &occluders {
-        Some(occ) => Some(write_cells(&mut w, occ, &records, &bounds, obs)?),
+        Some(occ) => Some(write_cells(
+            &mut w, occ, &records, &bounds, obs, &mut times,
+        )?),
         None => None,
     };
     let cell_stats = cells.as_ref().map(|c| c.stats.clone());
@@ -134,6 +141,8 @@ pub fn build(
         lod_time,
         write_time: t1.elapsed(),
         cells: cell_stats,
+        subdivision_seconds: times.0,
+        visibility_seconds: times.1,
     })
 }
 
@@ -145,6 +154,7 @@ fn write_cells(
     records: &[InstanceRecord],
     bounds: &Aabb,
     obs: &dyn Observer,
+    times: &mut (f64, f64),
 ) -> Result<CellIndex> {
     let objects: Vec<Aabb> = records.iter().map(|r| r.bounds).collect();
     obs.stage("cells", 1);
@@ -170,6 +180,7 @@ fn write_cells(
             }
         })
         .collect::<Result<Vec<_>>>()?;
+    *times = (pre.subdivision_seconds, pre.visibility_seconds);
     Ok(CellIndex {
         graph_segment,
         occluder_segment,

@@ -179,14 +179,16 @@ impl DbStats {
         }
         if let Some(c) = &self.cell_stats {
             s.push_str(&format!(
-                "\n  cells {} ({} live), portals {}, occluder faces {}{}\n  subdivision {:.2} s, visibility {:.2} s\n",
+                "\n  cells {} ({} live), portals {}, occluder faces {}{}\n",
                 c.cells,
                 c.live_cells,
                 c.portals,
                 c.occluder_boxes,
-                if c.grid_fallback { " (grid fallback)" } else { "" },
-                c.subdivision_seconds,
-                c.visibility_seconds
+                if c.grid_fallback {
+                    " (grid fallback)"
+                } else {
+                    ""
+                },
             ));
             s.push_str(&format!(
                 "\n  {:<28} {:>10} {:>8}\n",

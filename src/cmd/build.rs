@@ -69,8 +69,8 @@ pub fn run(a: Args) -> Result<()> {
             c.live_cells,
             c.portals,
             c.occluder_boxes,
-            c.subdivision_seconds,
-            c.visibility_seconds,
+            report.subdivision_seconds,
+            report.visibility_seconds,
             if c.grid_fallback {
                 " (no occluders: grid fallback)"
             } else {

@@ -250,10 +250,6 @@ pub struct CellStats {
     pub cells_visible: (f64, u64),
     /// (mean, max) objects visible.
     pub objects_visible: (f64, u64),
-    /// Seconds spent on the subdivision (with portals and incidence).
-    pub subdivision_seconds: f64,
-    /// Seconds spent on the visibility precomputation.
-    pub visibility_seconds: f64,
 }
 
 /// The result of the whole precomputation.
@@ -265,6 +261,11 @@ pub struct Precomputed {
     pub stabs: Vec<StabList>,
     /// Table 3.2 statistics.
     pub stats: CellStats,
+    /// Seconds spent on the subdivision (with portals and incidence). Not stored in the file,
+    /// which must not depend on timing.
+    pub subdivision_seconds: f64,
+    /// Seconds spent on the visibility precomputation.
+    pub visibility_seconds: f64,
 }
 
 /// Runs subdivision, portals, incidence and visibility for a model's occluder boxes and object
@@ -284,13 +285,13 @@ pub fn precompute(
     let t1 = std::time::Instant::now();
     on_stage("visibility", graph.cells.len() as u64);
     let stabs = stab::all_stab_lists(&graph, objects, incidence, on_cell);
-    let mut stats = stats(&graph, &stabs, occluders.faces.len());
-    stats.subdivision_seconds = subdivision_seconds;
-    stats.visibility_seconds = t1.elapsed().as_secs_f64();
+    let stats = stats(&graph, &stabs, occluders.faces.len());
     Precomputed {
         graph,
         stabs,
         stats,
+        subdivision_seconds,
+        visibility_seconds: t1.elapsed().as_secs_f64(),
     }
 }
 
@@ -318,7 +319,5 @@ fn stats(graph: &CellGraph, stabs: &[StabList], occluder_boxes: usize) -> CellSt
         objects_partial: mean_max(&|i| stabs[i].partial.len() as u64),
         cells_visible: mean_max(&|i| stabs[i].entries.len() as u64),
         objects_visible: mean_max(&|i| stabs[i].objects().len() as u64),
-        subdivision_seconds: 0.0,
-        visibility_seconds: 0.0,
     }
 }

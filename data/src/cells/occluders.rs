@@ -58,12 +58,23 @@ pub fn faces(mesh: &Mesh) -> Vec<Aabb> {
             (full > 0.0 && (area - full).abs() <= full * 0.01).then_some(b)
         })
         .collect();
-    out.sort_by(|a, b| {
-        a.min
-            .partial_cmp(&b.min)
+    sort_dedup(&mut out);
+    out
+}
+
+/// Sorts boxes by all six coordinates (a total order, so the result does not depend on hash
+/// order) and removes duplicates: the same input always gives the same database.
+fn sort_dedup(boxes: &mut Vec<Aabb>) {
+    let key = |b: &Aabb| [b.min[0], b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]];
+    boxes.sort_by(|a, b| {
+        key(a)
+            .iter()
+            .zip(key(b).iter())
+            .map(|(x, y)| x.total_cmp(y))
+            .find(|o| o.is_ne())
             .unwrap_or(std::cmp::Ordering::Equal)
     });
-    out
+    boxes.dedup();
 }
 
 /// Boxes written as 12 consecutive triangles covering exactly a box's surface: solid volume.
@@ -178,12 +189,8 @@ pub fn occluder_boxes<'a>(
             }
         }
     }
-    out.sort_by(|a, b| {
-        a.min
-            .partial_cmp(&b.min)
-            .unwrap_or(std::cmp::Ordering::Equal)
-    });
-    out.dedup();
+    sort_dedup(&mut out);
+    sort_dedup(&mut solids);
     Occluders { faces: out, solids }
 }
 
