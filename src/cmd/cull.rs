@@ -4,9 +4,11 @@
 use anyhow::{Context, Result};
 use glam::Vec3;
 use portico_data::Database;
+use portico_data::cells::CellGraph;
 use portico_data::cells::realtime::{Frustum, compare_culling};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use std::collections::{HashMap, VecDeque};
 use std::path::PathBuf;
 
 /// Arguments of `portico cull`.
@@ -20,6 +22,10 @@ pub struct Args {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Instead of random views, walk a tour: this many legs between random live cells, each
+    /// along the chain of portals joining them, one view every half metre, looking ahead.
+    #[arg(long)]
+    tour: Option<usize>,
     /// Horizontal field of view in degrees.
     #[arg(long, default_value_t = 60.0)]
     fov: f32,
@@ -50,24 +56,21 @@ pub fn run(a: Args) -> Result<()> {
     anyhow::ensure!(!live.is_empty(), "{}: no live cells", a.file.display());
     let mut rng = ChaCha8Rng::seed_from_u64(a.seed);
     let half_x = (a.fov * 0.5).to_radians();
-    let views: Vec<Frustum> = (0..a.views)
-        .map(|_| {
-            let b = graph.cells[live[rng.random_range(0..live.len())] as usize].bounds;
-            let eye = Vec3::from(std::array::from_fn::<f32, 3, _>(|k| {
-                b.min[k] + (b.max[k] - b.min[k]) * rng.random_range(0.05f32..0.95)
-            }));
-            let angle = rng.random_range(0.0..std::f32::consts::TAU);
-            let dir = Vec3::new(angle.cos(), 0.0, angle.sin());
-            Frustum::new(eye, dir, Vec3::Y, half_x, half_x * 0.75)
-        })
-        .collect();
+    let views: Vec<Frustum> = match a.tour {
+        Some(legs) => tour(&graph, &live, legs, &mut rng)
+            .into_iter()
+            .map(|(eye, dir)| Frustum::new(eye, dir, Vec3::Y, half_x, half_x * 0.75))
+            .collect(),
+        None => random_views(&graph, &live, a.views, half_x, &mut rng),
+    };
     let rows = compare_culling(&graph, &stabs, &objects, &polygons, &views);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
         return Ok(());
     }
+    let kind = if a.tour.is_some() { "tour" } else { "random" };
     println!(
-        "{} views of {} ({} live cells, {} objects)",
+        "{} {kind} views of {} ({} live cells, {} objects)",
         views.len(),
         a.file.display(),
         live.len(),
@@ -84,4 +87,83 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// Random eye points in live cells with random horizontal view directions.
+fn random_views(
+    graph: &CellGraph,
+    live: &[u32],
+    n: usize,
+    half_x: f32,
+    rng: &mut ChaCha8Rng,
+) -> Vec<Frustum> {
+    (0..n)
+        .map(|_| {
+            let b = graph.cells[live[rng.random_range(0..live.len())] as usize].bounds;
+            let eye = Vec3::from(std::array::from_fn::<f32, 3, _>(|k| {
+                b.min[k] + (b.max[k] - b.min[k]) * rng.random_range(0.05f32..0.95)
+            }));
+            let angle = rng.random_range(0.0..std::f32::consts::TAU);
+            let dir = Vec3::new(angle.cos(), 0.0, angle.sin());
+            Frustum::new(eye, dir, Vec3::Y, half_x, half_x * 0.75)
+        })
+        .collect()
+}
+
+/// A walk through the building: `legs` shortest cell paths (breadth-first over portals)
+/// between random live cells, through portal centres, sampled every half metre, each view
+/// looking along the (horizontal) direction of travel.
+fn tour(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rng) -> Vec<(Vec3, Vec3)> {
+    let mut at = live[rng.random_range(0..live.len())];
+    let mut points = vec![graph.cells[at as usize].bounds.center()];
+    for _ in 0..legs {
+        let target = live[rng.random_range(0..live.len())];
+        let Some(chain) = portal_chain(graph, at, target) else {
+            continue;
+        };
+        for p in chain {
+            points.push(graph.portals[p as usize].rect.center());
+        }
+        points.push(graph.cells[target as usize].bounds.center());
+        at = target;
+    }
+    let mut views = Vec::new();
+    let mut dir = Vec3::X;
+    for w in points.windows(2) {
+        let step = w[1] - w[0];
+        let flat = Vec3::new(step.x, 0.0, step.z);
+        if flat.length() > 1e-3 {
+            dir = flat.normalize();
+        }
+        let n = (step.length() / 0.5).ceil().max(1.0) as usize;
+        views.extend((0..n).map(|i| (w[0] + step * (i as f32 / n as f32), dir)));
+    }
+    views
+}
+
+/// Portals along a shortest cell path from `from` to `to`, if they are connected.
+fn portal_chain(graph: &CellGraph, from: u32, to: u32) -> Option<Vec<u32>> {
+    let mut came: HashMap<u32, (u32, u32)> = HashMap::new();
+    let mut queue = VecDeque::from([from]);
+    while let Some(c) = queue.pop_front() {
+        if c == to {
+            let mut chain = Vec::new();
+            let mut cur = to;
+            while cur != from {
+                let (prev, portal) = came[&cur];
+                chain.push(portal);
+                cur = prev;
+            }
+            chain.reverse();
+            return Some(chain);
+        }
+        for &p in &graph.cells[c as usize].portals {
+            let n = graph.portals[p as usize].other(c);
+            if n != from && !came.contains_key(&n) {
+                came.insert(n, (c, p));
+                queue.push_back(n);
+            }
+        }
+    }
+    None
 }
