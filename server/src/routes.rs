@@ -1,0 +1,357 @@
+//! The HTTP handlers (DESIGN §4): health, metrics, manifest, cells, segments (single, ranged,
+//! batched) and prefetch. Segment bytes go out as `Bytes` slices of the memory map: no copy.
+
+use crate::error::Error;
+use crate::state::AppState;
+use axum::body::{Body, Bytes};
+use axum::extract::rejection::BytesRejection;
+use axum::extract::{Path, Query, State};
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use portico_protocol::{BINCODE_MIME, JSON_MIME, PROTOCOL_VERSION, PrefetchRequest};
+use std::collections::HashSet;
+use std::sync::Arc;
+
+/// Cache-Control of everything that never changes for a given file.
+pub const IMMUTABLE: &str = "public, max-age=31536000, immutable";
+
+type Shared = State<Arc<AppState>>;
+
+/// `GET /healthz`.
+pub async fn healthz(State(s): Shared) -> impl IntoResponse {
+    let db = s.db();
+    axum::Json(serde_json::json!({
+        "status": "ok",
+        "database_id": s.database_id,
+        "model": db.header().name,
+        "segments": db.segments().len(),
+    }))
+}
+
+/// `GET /metrics` (Prometheus text).
+pub async fn metrics(State(s): Shared) -> impl IntoResponse {
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        s.metrics.render(),
+    )
+}
+
+/// Whether the client asked for bincode: an `Accept` naming bincode or JSON decides; otherwise
+/// (`*/*` or none) the answer matches the request's `Content-Type`.
+pub fn wants_bincode(headers: &HeaderMap) -> bool {
+    let get = |h: header::HeaderName| headers.get(h).and_then(|v| v.to_str().ok()).unwrap_or("");
+    let accept = get(header::ACCEPT);
+    if accept.contains(BINCODE_MIME) {
+        true
+    } else if accept.contains("json") {
+        false
+    } else {
+        get(header::CONTENT_TYPE).contains(BINCODE_MIME)
+    }
+}
+
+fn encoded(bincode: bool, bytes: Bytes, etag: Option<&str>) -> Response {
+    let mime = if bincode { BINCODE_MIME } else { JSON_MIME };
+    let mut r = ([(header::CONTENT_TYPE, mime)], bytes).into_response();
+    if let Some(tag) = etag.and_then(|t| HeaderValue::from_str(&format!("\"{t}\"")).ok()) {
+        r.headers_mut().insert(header::ETAG, tag);
+        r.headers_mut()
+            .insert(header::VARY, HeaderValue::from_static("accept"));
+    }
+    r
+}
+
+/// `GET /v1/manifest`: the segment table and the model header.
+pub async fn manifest(State(s): Shared, headers: HeaderMap) -> Response {
+    let tag = format!("m-{}", s.database_id);
+    if not_modified(&headers, &format!("\"{tag}\"")) {
+        return StatusCode::NOT_MODIFIED.into_response();
+    }
+    let b = wants_bincode(&headers);
+    let body = if b {
+        s.manifest_bincode.clone()
+    } else {
+        s.manifest_json()
+    };
+    encoded(b, body, Some(&tag))
+}
+
+/// `GET /v1/cells`: the compact cell graph (cell boxes, portals, adjacency, k-D tree). Bincode
+/// clients get the stored segment bytes as they are.
+pub async fn cells(State(s): Shared, headers: HeaderMap) -> Result<Response, Error> {
+    let Some(c) = &s.db().header().cells else {
+        return Err(Error::not_found(
+            "this database has no cells (built with --no-cells)",
+        ));
+    };
+    let b = wants_bincode(&headers);
+    let body = if b {
+        s.db().segment(c.graph_segment)?
+    } else {
+        s.cells_json()
+    };
+    Ok(encoded(b, body, Some(&format!("c-{}", s.database_id))))
+}
+
+fn parse_id(raw: &str, s: &AppState) -> Result<u32, Error> {
+    let id: u32 = raw
+        .parse()
+        .map_err(|_| Error::bad_request(format!("segment id {raw:?} is not a number")))?;
+    if id as usize >= s.db().segments().len() {
+        return Err(Error::not_found(format!(
+            "segment {id} does not exist (the database has {})",
+            s.db().segments().len()
+        )));
+    }
+    Ok(id)
+}
+
+fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
+    headers
+        .get(header::IF_NONE_MATCH)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"))
+}
+
+/// A `Range` header that cannot be served (answered with 416).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Unsatisfiable;
+
+/// A single byte range `bytes=a-b`, `bytes=a-` or `bytes=-n` resolved against `len`.
+/// `Ok(None)` = serve everything (no header, or several ranges, which we may ignore);
+/// `Err` = unsatisfiable (416).
+pub fn parse_range(value: &str, len: u64) -> Result<Option<(u64, u64)>, Unsatisfiable> {
+    let Some(spec) = value.trim().strip_prefix("bytes=") else {
+        return Ok(None);
+    };
+    if spec.contains(',') {
+        return Ok(None);
+    }
+    let (a, b) = spec.split_once('-').ok_or(Unsatisfiable)?;
+    let (a, b) = (a.trim(), b.trim());
+    let range = match (a.is_empty(), b.is_empty()) {
+        (true, false) => {
+            let n: u64 = b.parse().map_err(|_| Unsatisfiable)?;
+            if n == 0 {
+                return Err(Unsatisfiable);
+            }
+            (len.saturating_sub(n), len.saturating_sub(1))
+        }
+        (false, _) => {
+            let start: u64 = a.parse().map_err(|_| Unsatisfiable)?;
+            let end = if b.is_empty() {
+                len.saturating_sub(1)
+            } else {
+                b.parse().map_err(|_| Unsatisfiable)?
+            };
+            (start, end.min(len.saturating_sub(1)))
+        }
+        (true, true) => return Err(Unsatisfiable),
+    };
+    if range.0 >= len || range.0 > range.1 {
+        return Err(Unsatisfiable);
+    }
+    Ok(Some(range))
+}
+
+/// `GET /v1/segments/{id}`: the segment's bytes straight from the map, with a strong ETag,
+/// immutable caching, conditional requests and single byte ranges.
+pub async fn segment(
+    State(s): Shared,
+    Path(raw): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, Error> {
+    let id = parse_id(&raw, &s)?;
+    let entry = s.db().segments()[id as usize];
+    let etag = format!("\"{:016x}\"", entry.checksum);
+    let mut builder = Response::builder()
+        .header(header::ETAG, &etag)
+        .header(header::CACHE_CONTROL, IMMUTABLE)
+        .header(header::ACCEPT_RANGES, "bytes")
+        .header("x-portico-kind", entry.kind);
+    if not_modified(&headers, &etag) {
+        return Ok(builder
+            .status(StatusCode::NOT_MODIFIED)
+            .body(Body::empty())
+            .unwrap_or_default());
+    }
+    let bytes = s.db().segment(id)?;
+    let len = bytes.len() as u64;
+    let range = match headers.get(header::RANGE).and_then(|v| v.to_str().ok()) {
+        None => None,
+        Some(v) => parse_range(v, len).map_err(|Unsatisfiable| {
+            Error::new(
+                StatusCode::RANGE_NOT_SATISFIABLE,
+                "range",
+                format!("range {v:?} is outside the segment's {len} bytes"),
+            )
+        })?,
+    };
+    builder = builder.header(header::CONTENT_TYPE, "application/octet-stream");
+    let (status, body) = match range {
+        Some((a, b)) => {
+            builder = builder.header(header::CONTENT_RANGE, format!("bytes {a}-{b}/{len}"));
+            (
+                StatusCode::PARTIAL_CONTENT,
+                bytes.slice(a as usize..=b as usize),
+            )
+        }
+        None => (StatusCode::OK, bytes),
+    };
+    s.metrics.sent(body.len() as u64);
+    Ok(builder
+        .status(status)
+        .body(Body::from(body))
+        .unwrap_or_default())
+}
+
+/// Query of `GET /v1/batch`.
+#[derive(Debug, serde::Deserialize)]
+pub struct BatchQuery {
+    /// Comma-separated segment ids.
+    pub ids: String,
+}
+
+/// `GET /v1/batch?ids=3,4,9`: several segments in one answer (cell-granularity reads). The body
+/// is, per segment, its id (`u32` LE), its length (`u64` LE) and its bytes, streamed from the
+/// map without copying. The answer is immutable for a given id list.
+pub async fn batch(State(s): Shared, Query(q): Query<BatchQuery>) -> Result<Response, Error> {
+    let ids: Vec<u32> = q
+        .ids
+        .split(',')
+        .filter(|t| !t.is_empty())
+        .map(|t| parse_id(t.trim(), &s))
+        .collect::<Result<_, _>>()?;
+    if ids.is_empty() || ids.len() > s.config.max_batch {
+        return Err(Error::bad_request(format!(
+            "a batch holds 1 to {} segment ids, not {}",
+            s.config.max_batch,
+            ids.len()
+        )));
+    }
+    let mut chunks = Vec::with_capacity(ids.len() * 2);
+    let mut total = 0u64;
+    for id in ids {
+        let bytes = s.db().segment(id)?;
+        let mut head = Vec::with_capacity(12);
+        head.extend_from_slice(&id.to_le_bytes());
+        head.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
+        total += 12 + bytes.len() as u64;
+        s.metrics.sent(bytes.len() as u64);
+        chunks.push(Ok::<_, std::io::Error>(Bytes::from(head)));
+        chunks.push(Ok(bytes));
+    }
+    let body = Body::from_stream(futures_util::stream::iter(chunks));
+    Ok(Response::builder()
+        .header(header::CONTENT_TYPE, "application/x-portico-batch")
+        .header(header::CONTENT_LENGTH, total)
+        .header(header::CACHE_CONTROL, IMMUTABLE)
+        .body(body)
+        .unwrap_or_default())
+}
+
+/// Decodes a request body by its `Content-Type`.
+pub fn decode_body<T: serde::de::DeserializeOwned>(
+    headers: &HeaderMap,
+    body: &[u8],
+) -> Result<T, Error> {
+    let ct = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("");
+    let r = if ct.contains(BINCODE_MIME) {
+        portico_protocol::from_bincode(body)
+    } else if ct.contains("json") {
+        portico_protocol::from_json(body)
+    } else {
+        return Err(Error::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "content_type",
+            format!("Content-Type must be {BINCODE_MIME} or {JSON_MIME}, not {ct:?}"),
+        ));
+    };
+    r.map_err(|e| Error::bad_request(format!("request body does not decode: {e}")))
+}
+
+/// Checks a prefetch request's numbers, so hostile values cannot make the answer huge or slow.
+pub fn validate(req: &PrefetchRequest) -> Result<HashSet<u32>, Error> {
+    if req.version != PROTOCOL_VERSION {
+        return Err(Error::bad_request(format!(
+            "protocol version {} is not supported (server speaks {PROTOCOL_VERSION})",
+            req.version
+        )));
+    }
+    let o = &req.observer;
+    let floats = o.eye.iter().chain(&o.dir).chain(&o.up).chain(&o.velocity);
+    let scalars = [
+        o.half_fov_x,
+        o.half_fov_y,
+        o.max_speed,
+        o.max_turn,
+        req.policy.frame_time_s,
+        req.policy.size_threshold_px,
+    ];
+    if floats.chain(&scalars).any(|x| !x.is_finite()) || scalars.iter().any(|&x| x < 0.0) {
+        return Err(Error::bad_request(
+            "observer and policy numbers must be finite and not negative",
+        ));
+    }
+    let p = &req.policy;
+    if p.depth_frames > 100_000 || p.screen.iter().any(|&d| d == 0 || d > 32_768) {
+        return Err(Error::bad_request(
+            "depth_frames ≤ 100000 and a screen of 1..=32768 pixels per side",
+        ));
+    }
+    let held = portico_protocol::decode_held(&req.held)
+        .ok_or_else(|| Error::bad_request("held set is not a valid delta-coded id list"))?;
+    Ok(held.into_iter().collect())
+}
+
+/// `POST /v1/prefetch`: Funkhouser §5.2's lookahead for one observer.
+pub async fn prefetch(
+    State(s): Shared,
+    headers: HeaderMap,
+    body: Result<Bytes, BytesRejection>,
+) -> Result<Response, Error> {
+    let body = body.map_err(|e| Error::new(e.status(), "body", e.body_text()))?;
+    let req: PrefetchRequest = decode_body(&headers, &body)?;
+    let held = validate(&req)?;
+    let answer = s.prefetcher.answer(&req.observer, &req.policy, &held)?;
+    s.metrics
+        .prefetch_answers
+        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let b = wants_bincode(&headers);
+    let bytes = if b {
+        portico_protocol::to_bincode(&answer).map_err(|e| Error::bad_request(e.to_string()))?
+    } else {
+        serde_json::to_vec(&answer).map_err(|e| Error::bad_request(e.to_string()))?
+    };
+    Ok(encoded(b, Bytes::from(bytes), None))
+}
+
+/// Any other path.
+pub async fn fallback() -> Error {
+    Error::not_found(
+        "no such endpoint; see /v1/manifest, /v1/cells, /v1/segments/{id}, /v1/batch, /v1/prefetch, /v1/stream",
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Unsatisfiable, parse_range};
+
+    #[test]
+    fn byte_ranges() {
+        assert_eq!(parse_range("bytes=0-9", 100), Ok(Some((0, 9))));
+        assert_eq!(parse_range("bytes=90-", 100), Ok(Some((90, 99))));
+        assert_eq!(parse_range("bytes=-10", 100), Ok(Some((90, 99))));
+        assert_eq!(parse_range("bytes=50-500", 100), Ok(Some((50, 99))));
+        assert_eq!(parse_range("bytes=0-1,5-6", 100), Ok(None));
+        assert_eq!(parse_range("items=1-2", 100), Ok(None));
+        assert_eq!(parse_range("bytes=100-", 100), Err(Unsatisfiable));
+        assert_eq!(parse_range("bytes=9-3", 100), Err(Unsatisfiable));
+        assert_eq!(parse_range("bytes=-0", 100), Err(Unsatisfiable));
+        assert_eq!(parse_range("bytes=x-3", 100), Err(Unsatisfiable));
+        assert_eq!(parse_range("bytes=-", 100), Err(Unsatisfiable));
+    }
+}

@@ -1,0 +1,111 @@
+//! What every handler shares: the database (through the prefetcher), precomputed answers for
+//! the immutable documents, limits, metrics, and the session gate.
+
+use crate::config::Config;
+use crate::metrics::Metrics;
+use bytes::Bytes;
+use portico_data::prefetch::Prefetcher;
+use portico_data::{DataError, Database};
+use portico_protocol::{Manifest, PROTOCOL_VERSION, SegmentInfo};
+use std::sync::{Arc, OnceLock};
+use tokio::sync::{Semaphore, watch};
+
+/// Shared server state (one per served file).
+pub struct AppState {
+    /// Prefetch answers over the database (owns the `Arc<Database>`).
+    pub prefetcher: Prefetcher,
+    /// Limits and options.
+    pub config: Config,
+    /// Counters and histograms.
+    pub metrics: Metrics,
+    /// Strong identifier of the file's contents (the manifest's ETag).
+    pub database_id: String,
+    /// The manifest, bincode-encoded once at start-up.
+    pub manifest_bincode: Bytes,
+    manifest_json: OnceLock<Bytes>,
+    cells_json: OnceLock<Bytes>,
+    /// One permit per allowed stream session.
+    pub sessions: Arc<Semaphore>,
+    /// Flips to `true` when the server shuts down; stream sessions watch it and close.
+    pub shutdown: watch::Sender<bool>,
+}
+
+impl std::fmt::Debug for AppState {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("AppState")
+            .field("database_id", &self.database_id)
+            .finish()
+    }
+}
+
+impl AppState {
+    /// Opens the file read-only (memory-mapped), validates it, and prepares the manifest.
+    pub fn open(path: &std::path::Path, config: Config) -> Result<Arc<AppState>, DataError> {
+        let db = Arc::new(Database::open(path)?);
+        Self::new(db, config)
+    }
+
+    /// Wraps an already open database.
+    pub fn new(db: Arc<Database>, config: Config) -> Result<Arc<AppState>, DataError> {
+        let p = db.prologue();
+        let database_id = format!("{:016x}{:016x}", p.header_checksum, p.index_checksum);
+        let manifest = manifest(&db, &database_id);
+        let manifest_bincode = portico_protocol::to_bincode(&manifest)
+            .map(Bytes::from)
+            .map_err(|e| DataError::NotFound(format!("manifest does not encode: {e}")))?;
+        let sessions = Arc::new(Semaphore::new(config.max_sessions));
+        Ok(Arc::new(AppState {
+            prefetcher: Prefetcher::new(db)?,
+            config,
+            metrics: Metrics::default(),
+            database_id,
+            manifest_bincode,
+            manifest_json: OnceLock::new(),
+            cells_json: OnceLock::new(),
+            sessions,
+            shutdown: watch::channel(false).0,
+        }))
+    }
+
+    /// The database.
+    pub fn db(&self) -> &Database {
+        self.prefetcher.database()
+    }
+
+    /// The manifest as JSON (encoded on first use: it is large for big models).
+    pub fn manifest_json(&self) -> Bytes {
+        self.manifest_json
+            .get_or_init(|| {
+                let m = manifest(self.db(), &self.database_id);
+                Bytes::from(serde_json::to_vec(&m).unwrap_or_default())
+            })
+            .clone()
+    }
+
+    /// The cell graph as JSON (bincode clients get the stored segment bytes unchanged).
+    pub fn cells_json(&self) -> Bytes {
+        self.cells_json
+            .get_or_init(|| {
+                Bytes::from(serde_json::to_vec(&self.prefetcher.graph()).unwrap_or_default())
+            })
+            .clone()
+    }
+}
+
+fn manifest<'a>(db: &'a Database, id: &str) -> Manifest<&'a portico_data::format::Header> {
+    Manifest {
+        protocol_version: PROTOCOL_VERSION,
+        database_id: id.to_string(),
+        file_bytes: db.file_len(),
+        segments: db
+            .segments()
+            .iter()
+            .map(|e| SegmentInfo {
+                kind: e.kind,
+                bytes: e.length,
+                checksum: e.checksum,
+            })
+            .collect(),
+        header: db.header(),
+    }
+}
