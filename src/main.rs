@@ -27,6 +27,12 @@ enum Command {
     Verify(cmd::verify::Args),
     /// Compare visibility culling methods over random views (Funkhouser Table 4.1).
     Cull(cmd::cull::Args),
+    /// Serve a display database over HTTP and WebSocket.
+    Serve(cmd::serve::Args),
+    /// Make a standard observer path (tour, spin, revisit) through a model's cells.
+    Path(cmd::path::Args),
+    /// Walk a path through a served model with the headless wgpu client.
+    Walk(cmd::walk::Args),
 }
 
 fn main() -> ExitCode {
@@ -44,6 +50,9 @@ fn main() -> ExitCode {
         Command::Inspect(a) => cmd::inspect::run(a),
         Command::Verify(a) => cmd::verify::run(a),
         Command::Cull(a) => cmd::cull::run(a),
+        Command::Serve(a) => cmd::serve::run(a),
+        Command::Path(a) => cmd::path::run(a),
+        Command::Walk(a) => cmd::walk::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -15,6 +15,7 @@ pub mod geometry;
 pub mod import;
 pub mod lod;
 pub mod model;
+pub mod path;
 pub mod prefetch;
 pub mod stats;
 

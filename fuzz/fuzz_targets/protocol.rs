@@ -1,9 +1,16 @@
-//! Fuzzes the protocol decoders: any bytes give a message or an error, never a panic.
+//! Fuzzes the protocol decoders the server exposes: any bytes give a message or an error, never
+//! a panic (the prefetch body, stream messages in both encodings, server frames, held sets).
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
+use portico_protocol::{PrefetchRequest, StreamClient};
 
 fuzz_target!(|data: &[u8]| {
-    let _ = portico_protocol::from_bincode::<(u32, String, Vec<f32>)>(data);
-    let _ = portico_protocol::from_json::<serde_json::Value>(data);
+    if let Ok(req) = portico_protocol::from_bincode::<PrefetchRequest>(data) {
+        let _ = portico_protocol::decode_held(&req.held);
+    }
+    let _ = portico_protocol::from_json::<PrefetchRequest>(data);
+    let _ = portico_protocol::from_bincode::<StreamClient>(data);
+    let _ = portico_protocol::from_json::<StreamClient>(data);
+    let _ = portico_protocol::parse_server_frame(data);
 });

@@ -6,9 +6,9 @@ use glam::Vec3;
 use portico_data::Database;
 use portico_data::cells::CellGraph;
 use portico_data::cells::realtime::{Frustum, compare_culling};
+use portico_data::path::portal_chain;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use std::collections::{HashMap, VecDeque};
 use std::path::PathBuf;
 
 /// Arguments of `portico cull`.
@@ -139,31 +139,4 @@ fn tour(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rng) -> V
         views.extend((0..n).map(|i| (w[0] + step * (i as f32 / n as f32), dir)));
     }
     views
-}
-
-/// Portals along a shortest cell path from `from` to `to`, if they are connected.
-fn portal_chain(graph: &CellGraph, from: u32, to: u32) -> Option<Vec<u32>> {
-    let mut came: HashMap<u32, (u32, u32)> = HashMap::new();
-    let mut queue = VecDeque::from([from]);
-    while let Some(c) = queue.pop_front() {
-        if c == to {
-            let mut chain = Vec::new();
-            let mut cur = to;
-            while cur != from {
-                let (prev, portal) = came[&cur];
-                chain.push(portal);
-                cur = prev;
-            }
-            chain.reverse();
-            return Some(chain);
-        }
-        for &p in &graph.cells[c as usize].portals {
-            let n = graph.portals[p as usize].other(c);
-            if n != from && !came.contains_key(&n) {
-                came.insert(n, (c, p));
-                queue.push_back(n);
-            }
-        }
-    }
-    None
 }

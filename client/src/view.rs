@@ -1,0 +1,162 @@
+//! The visibility stage of one frame (Funkhouser §4.1.2) and the candidates it hands to detail
+//! elision: eye-to-cell and eye-to-object culling through the portals of the server's cell
+//! graph with the eye cell's stab list (or plain frustum culling while that stab list is not yet
+//! resident), then each visible object's screen size and focus.
+
+use crate::elision::{Candidate, LodOption};
+use glam::{Mat4, Vec3, Vec4};
+use portico_data::cells::realtime::{Frustum, eye_to_cell, eye_to_object, frustum_to_object};
+use portico_data::cells::{CellGraph, StabList};
+use portico_data::format::Header;
+use portico_data::geometry::Aabb;
+
+/// What the visibility stage found.
+#[derive(Debug, Clone, Default)]
+pub struct Visible {
+    /// Cells visible from the eye.
+    pub cells: u32,
+    /// Visible instances, sorted.
+    pub objects: Vec<u32>,
+    /// The eye cell's stab list was not resident: frustum culling was used.
+    pub fallback: bool,
+    /// The eye's cell, if inside a live cell.
+    pub eye_cell: Option<u32>,
+}
+
+/// Eye-to-object visibility with whatever the cache holds.
+pub fn visible(
+    graph: Option<&CellGraph>,
+    stab: &dyn Fn(u32) -> Option<std::sync::Arc<StabList>>,
+    bounds: &[Aabb],
+    view: &Frustum,
+) -> Visible {
+    let Some(graph) = graph else {
+        return Visible {
+            cells: 0,
+            objects: frustum_to_object(bounds, view),
+            fallback: true,
+            eye_cell: None,
+        };
+    };
+    let eye_cell = graph
+        .locate(view.eye)
+        .filter(|&c| graph.cells[c as usize].live);
+    let reached = eye_to_cell(graph, view);
+    match eye_cell.and_then(stab) {
+        Some(list) => Visible {
+            cells: reached.len() as u32,
+            objects: eye_to_object(&reached, &list, bounds),
+            fallback: false,
+            eye_cell,
+        },
+        None => Visible {
+            cells: reached.len() as u32,
+            objects: frustum_to_object(bounds, view),
+            fallback: true,
+            eye_cell,
+        },
+    }
+}
+
+/// Screen area in pixels of a box's projection (its screen-space bounding rectangle, clipped to
+/// the screen); the whole screen when the box reaches behind the near plane.
+pub fn screen_pixels(b: &Aabb, view_proj: &Mat4, width: u32, height: u32) -> f32 {
+    let (mut lo, mut hi) = (glam::Vec2::splat(f32::MAX), glam::Vec2::splat(f32::MIN));
+    for i in 0..8 {
+        let c = Vec3::new(
+            if i & 1 == 0 { b.min[0] } else { b.max[0] },
+            if i & 2 == 0 { b.min[1] } else { b.max[1] },
+            if i & 4 == 0 { b.min[2] } else { b.max[2] },
+        );
+        let p = *view_proj * Vec4::new(c.x, c.y, c.z, 1.0);
+        if p.w <= 1e-4 {
+            return (width * height) as f32;
+        }
+        let ndc = glam::Vec2::new(p.x, p.y) / p.w;
+        lo = lo.min(ndc);
+        hi = hi.max(ndc);
+    }
+    let lo = lo.clamp(glam::Vec2::splat(-1.0), glam::Vec2::ONE);
+    let hi = hi.clamp(glam::Vec2::splat(-1.0), glam::Vec2::ONE);
+    let size = (hi - lo).max(glam::Vec2::ZERO) * 0.5;
+    size.x * width as f32 * size.y * height as f32
+}
+
+/// Where the frame is seen from, as the candidates need it.
+#[derive(Debug, Clone, Copy)]
+pub struct Viewpoint {
+    /// World-to-clip matrix.
+    pub view_proj: Mat4,
+    /// Eye position.
+    pub eye: Vec3,
+    /// Unit view direction.
+    pub dir: Vec3,
+    /// Image size in pixels.
+    pub size: (u32, u32),
+    /// Horizontal half field of view (radians), for the focus term.
+    pub half_fov: f32,
+}
+
+/// Elision candidates for the visible objects; `resident(segment)` says what the cache holds.
+pub fn candidates(
+    header: &Header,
+    objects: &[u32],
+    v: &Viewpoint,
+    resident: &dyn Fn(u32) -> bool,
+) -> Vec<Candidate> {
+    objects
+        .iter()
+        .filter_map(|&o| {
+            let inst = header.instances.get(o as usize)?;
+            let lods: Vec<LodOption> = header
+                .lods_of(inst)
+                .iter()
+                .map(|l| LodOption {
+                    triangles: l.triangles,
+                    vertices: l.vertices,
+                    error: l.error,
+                    resident: resident(l.segment),
+                })
+                .collect();
+            let pixels = screen_pixels(&inst.bounds, &v.view_proj, v.size.0, v.size.1);
+            let to = inst.bounds.center() - v.eye;
+            let angle = to.try_normalize().map_or(0.0, |t| t.angle_between(v.dir));
+            let mut c = Candidate::new(o, lods, pixels);
+            c.focus = (1.0 - angle / v.half_fov.max(1e-3)).clamp(0.0, 1.0);
+            Some(c)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nearer_boxes_cover_more_pixels_and_behind_covers_the_screen() {
+        let cam = crate::render::Camera {
+            eye: Vec3::ZERO,
+            target: Vec3::NEG_Z,
+            up: Vec3::Y,
+            fovy: 1.0,
+            near: 0.1,
+            far: 100.0,
+        };
+        let vp = cam.view_proj(4.0 / 3.0);
+        let boxed = |z: f32| Aabb {
+            min: [-0.5, -0.5, z - 0.5],
+            max: [0.5, 0.5, z + 0.5],
+        };
+        let near = screen_pixels(&boxed(-3.0), &vp, 640, 480);
+        let far = screen_pixels(&boxed(-10.0), &vp, 640, 480);
+        assert!(near > far * 4.0, "{near} vs {far}");
+        assert!(far > 0.0);
+        assert_eq!(screen_pixels(&boxed(0.0), &vp, 640, 480), 640.0 * 480.0);
+        // Off to the side, clipped away.
+        let side = Aabb {
+            min: [50.0, -0.5, -3.5],
+            max: [51.0, 0.5, -2.5],
+        };
+        assert_eq!(screen_pixels(&side, &vp, 640, 480), 0.0);
+    }
+}

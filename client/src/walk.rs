@@ -1,0 +1,517 @@
+//! `portico walk`: the walkthrough client's frame loop (Funkhouser Ch. 6, DESIGN §5).
+//!
+//! Each frame: take what the IO stage delivered into the byte-budgeted cache → observer from
+//! the path → eye-to-object visibility → candidates → detail elision at the frame budget over
+//! RESIDENT LODs only → render → publish the observer and the held set to the IO stage. The
+//! loop never waits for the network: what has not arrived is skipped and counted (§5.2.4).
+
+use crate::cache::ObjectCache;
+use crate::cost::{CostModel, OnlineCost};
+use crate::elision::{Algorithm, Elider};
+use crate::io::{Arrival, FrameState, IoConfig, IoStage, Payload};
+use crate::net::Remote;
+use crate::render::{Camera, Draw, GpuMesh, Renderer};
+use crate::stats::{FrameRow, Series, write_csv};
+use crate::view;
+use anyhow::{Context, Result};
+use glam::{Mat4, Vec3};
+use portico_data::cells::realtime::Frustum;
+use portico_data::cells::{CellGraph, StabList};
+use portico_data::format::Header;
+use portico_data::geometry::{Mesh, Vertex, encode_geometry};
+use portico_data::path::CameraPath;
+use portico_protocol::{Observer, Policy};
+use serde::Serialize;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// Everything `portico walk` can be told.
+#[derive(Debug, Clone)]
+pub struct WalkConfig {
+    /// Server base URL.
+    pub server: String,
+    /// Bearer token, if the server wants one.
+    pub token: Option<String>,
+    /// The path to replay.
+    pub path: CameraPath,
+    /// Frame-time budget in seconds.
+    pub budget_s: f64,
+    /// Cache byte budget.
+    pub cache_bytes: u64,
+    /// Image size.
+    pub size: (u32, u32),
+    /// Detail elision algorithm.
+    pub elision: Algorithm,
+    /// Prefetch policy (its `cache_bytes`, `screen` and `frame_time_s` are set from the above).
+    pub policy: Policy,
+    /// Output directory (frames.csv, summary.json, PNGs).
+    pub out: Option<PathBuf>,
+    /// Save every n-th frame as PNG (0 = none).
+    pub png_every: u64,
+    /// Stop after this many frames.
+    pub max_frames: Option<u64>,
+    /// Hold each frame to the budget, as a display at that rate would (path time stays in step
+    /// with wall time). Off: frames run back to back.
+    pub pace: bool,
+    /// Vertical field of view in radians.
+    pub fovy: f32,
+    /// Maximum observer speed (m/s) and turn rate (rad/s) announced to the server.
+    pub max_speed: f32,
+    /// See `max_speed`.
+    pub max_turn: f32,
+}
+
+/// The result of a walk (`summary.json`).
+#[derive(Debug, Clone, Serialize)]
+pub struct WalkSummary {
+    /// GPU adapter the frames were drawn on.
+    pub adapter: String,
+    /// Server URL.
+    pub server: String,
+    /// Model name and database id.
+    pub model: String,
+    /// Database id (content hash).
+    pub database_id: String,
+    /// Path kind and hash.
+    pub path: String,
+    /// Path hash.
+    pub path_hash: String,
+    /// Elision algorithm.
+    pub elision: String,
+    /// Frame budget (s).
+    pub budget_s: f64,
+    /// Frames drawn.
+    pub frames: u64,
+    /// Frame time.
+    pub frame_s: Series,
+    /// Render time alone.
+    pub render_s: Series,
+    /// Frames whose frame time exceeded the budget.
+    pub frames_over_budget: u64,
+    /// LODs skipped per frame.
+    pub lods_skipped: Series,
+    /// Objects skipped per frame.
+    pub objects_skipped: Series,
+    /// Objects visible per frame.
+    pub visible_objects: Series,
+    /// Triangles drawn per frame.
+    pub drawn_triangles: Series,
+    /// Triangles of the whole model at the finest LOD.
+    pub model_triangles: u64,
+    /// Mean drawn triangles as a fraction of the whole model.
+    pub drawn_fraction: f64,
+    /// Frames whose eye cell stab list was not resident.
+    pub visibility_fallback_frames: u64,
+    /// Cache budget (bytes).
+    pub cache_budget: u64,
+    /// Most bytes ever resident (never above the budget).
+    pub cache_peak_bytes: u64,
+    /// Segments released.
+    pub evictions: u64,
+    /// Segments and bytes read from the server.
+    pub segments_read: u64,
+    /// Bytes read.
+    pub bytes_read: u64,
+    /// Seconds from the prefetch request listing a segment to its arrival.
+    pub fetch_latency_s: Series,
+    /// IO failures (logged, not fatal).
+    pub io_failures: u64,
+    /// Calibrated cost model.
+    pub cost_model: CostModel,
+    /// Final online correction factor.
+    pub cost_factor: f64,
+    /// Wall-clock seconds of the whole walk.
+    pub wall_s: f64,
+}
+
+/// A cached segment.
+enum Resident {
+    Mesh(GpuMesh),
+    Stab(Arc<StabList>),
+}
+
+/// The model as the client knows it.
+struct Model {
+    header: Header,
+    graph: Option<CellGraph>,
+    bounds: Vec<portico_data::geometry::Aabb>,
+    database_id: String,
+    model_triangles: u64,
+}
+
+/// Runs a walk; `on_frame(done, total)` reports progress.
+pub fn walk(cfg: &WalkConfig, on_frame: &mut dyn FnMut(u64, u64)) -> Result<WalkSummary> {
+    cfg.path
+        .validate()
+        .map_err(anyhow::Error::msg)
+        .context("the walk path")?;
+    let start = Instant::now();
+    let remote = Remote::new(&cfg.server, cfg.token.clone())?;
+    let model = load_model(&remote)?;
+    let mut renderer = Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
+    let cost = calibrate(&mut renderer)?;
+    let policy = Policy {
+        cache_bytes: cfg.cache_bytes,
+        screen: [cfg.size.0, cfg.size.1],
+        frame_time_s: cfg.budget_s as f32,
+        ..cfg.policy
+    };
+    let io = IoStage::start(
+        remote,
+        renderer.uploader(),
+        IoConfig {
+            policy,
+            parallel: 8,
+        },
+    )?;
+    let mut w = Walker::new(cfg, model, cost);
+    let result = w.run(&mut renderer, io, on_frame);
+    let rows = result?;
+    w.finish(&renderer, &rows, start.elapsed().as_secs_f64())
+}
+
+fn load_model(remote: &Remote) -> Result<Model> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    rt.block_on(async {
+        let m = remote.manifest().await?;
+        let graph = match m.header.cells {
+            Some(_) => Some(remote.cells().await?),
+            None => None,
+        };
+        let bounds = m.header.instances.iter().map(|i| i.bounds).collect();
+        let model_triangles = m
+            .header
+            .instances
+            .iter()
+            .map(|i| {
+                m.header
+                    .lods_of(i)
+                    .first()
+                    .map_or(0, |l| l.triangles as u64)
+            })
+            .sum();
+        Ok(Model {
+            header: m.header,
+            graph,
+            bounds,
+            database_id: m.database_id,
+            model_triangles,
+        })
+    })
+}
+
+/// Funkhouser §4.2.3: C1, C2, C3 from timed sample draws at start-up.
+fn calibrate(r: &mut Renderer) -> Result<CostModel> {
+    let n = 24u32;
+    let mut mesh = Mesh::default();
+    for j in 0..=n {
+        for i in 0..=n {
+            let p = [i as f32 / n as f32, j as f32 / n as f32, 0.0];
+            mesh.vertices
+                .push(Vertex::new(p, [0.0, 0.0, 1.0], [0.8, 0.8, 0.8, 1.0]));
+        }
+    }
+    for j in 0..n {
+        for i in 0..n {
+            let a = j * (n + 1) + i;
+            mesh.indices
+                .extend([a, a + 1, a + n + 1, a + 1, a + n + 2, a + n + 1]);
+        }
+    }
+    let gpu = r.upload(&encode_geometry(&mesh))?;
+    let geometry = r.sample_costs(&gpu, &[1, 16, 64, 128])?;
+    let fill = r.sample_fill(&[0.25, 0.5, 1.0])?;
+    Ok(CostModel::calibrate(&geometry, &fill))
+}
+
+/// The frame loop's state.
+struct Walker<'a> {
+    cfg: &'a WalkConfig,
+    model: Model,
+    cache: ObjectCache<Resident>,
+    elider: Elider,
+    cost: CostModel,
+    online: OnlineCost,
+    consumed: u64,
+    latencies: Vec<f64>,
+    failures: u64,
+    segments_read: u64,
+    bytes_read: u64,
+    last_frame_s: Option<f64>,
+}
+
+impl<'a> Walker<'a> {
+    fn new(cfg: &'a WalkConfig, model: Model, cost: CostModel) -> Walker<'a> {
+        Walker {
+            cfg,
+            model,
+            cache: ObjectCache::new(cfg.cache_bytes),
+            elider: Elider::new(cfg.elision, cfg.budget_s),
+            cost,
+            online: OnlineCost::default(),
+            consumed: 0,
+            latencies: Vec::new(),
+            failures: 0,
+            segments_read: 0,
+            bytes_read: 0,
+            last_frame_s: None,
+        }
+    }
+
+    fn run(
+        &mut self,
+        r: &mut Renderer,
+        mut io: IoStage,
+        on_frame: &mut dyn FnMut(u64, u64),
+    ) -> Result<Vec<FrameRow>> {
+        let dt = self.cfg.budget_s.max(1e-3);
+        let total = ((self.cfg.path.duration() as f64 / dt).ceil() as u64 + 1)
+            .min(self.cfg.max_frames.unwrap_or(u64::MAX));
+        let mut rows = Vec::with_capacity(total as usize);
+        if let Some(out) = &self.cfg.out {
+            std::fs::create_dir_all(out.join("frames"))
+                .with_context(|| format!("creating {}", out.display()))?;
+        }
+        let mut outcome = Ok(());
+        for frame in 0..total {
+            let t0 = Instant::now();
+            let mut row = FrameRow {
+                frame,
+                t: frame as f64 * dt,
+                ..FrameRow::default()
+            };
+            self.take_arrivals(&mut io, &mut row);
+            let obs = self.observer(row.t as f32, dt as f32);
+            if let Err(e) = self.frame(r, &obs, &mut row) {
+                outcome = Err(e);
+                break;
+            }
+            row.frame_s = t0.elapsed().as_secs_f64();
+            self.last_frame_s = Some(row.frame_s);
+            self.online.observe(row.predicted_s, row.render_s);
+            self.publish(&io, frame, obs);
+            rows.push(row);
+            on_frame(frame + 1, total);
+            if self.cfg.png_every > 0 && frame % self.cfg.png_every == 0 {
+                self.save_png(r, frame)?;
+            }
+            if self.cfg.pace {
+                std::thread::sleep(Duration::from_secs_f64(dt).saturating_sub(t0.elapsed()));
+            }
+        }
+        io.stop();
+        outcome.map(|()| rows)
+    }
+
+    /// Moves everything the IO stage delivered into the cache (never above its budget).
+    fn take_arrivals(&mut self, io: &mut IoStage, row: &mut FrameRow) {
+        while let Ok(a) = io.arrivals.try_recv() {
+            self.consumed += 1;
+            match a {
+                Arrival::Segment {
+                    id,
+                    payload,
+                    bytes,
+                    latency_s,
+                } => {
+                    row.read_segments += 1;
+                    row.read_bytes += bytes;
+                    self.segments_read += 1;
+                    self.bytes_read += bytes;
+                    self.latencies.push(latency_s);
+                    let value = match payload {
+                        Payload::Mesh(m) => Resident::Mesh(m),
+                        Payload::Stab(s) => Resident::Stab(s),
+                    };
+                    if let Ok(released) = self.cache.insert(id, value, bytes) {
+                        row.released_segments += released.len() as u32;
+                    }
+                }
+                Arrival::Hints(ids) => ids.iter().for_each(|&id| self.cache.demote(id)),
+                Arrival::Failed(e) => {
+                    self.failures += 1;
+                    tracing::warn!("io: {e}");
+                }
+            }
+        }
+    }
+
+    fn observer(&self, t: f32, dt: f32) -> Observer {
+        let (eye, dir) = self.cfg.path.sample(t);
+        let (next, _) = self.cfg.path.sample(t + dt);
+        let half_y = self.cfg.fovy * 0.5;
+        let aspect = self.cfg.size.0 as f32 / self.cfg.size.1.max(1) as f32;
+        Observer {
+            eye: eye.into(),
+            dir: dir.into(),
+            up: [0.0, 1.0, 0.0],
+            velocity: ((next - eye) / dt).into(),
+            half_fov_x: (half_y.tan() * aspect).atan(),
+            half_fov_y: half_y,
+            max_speed: self.cfg.max_speed,
+            max_turn: self.cfg.max_turn,
+        }
+    }
+
+    /// Visibility → elision → render for one frame.
+    fn frame(&mut self, r: &mut Renderer, obs: &Observer, row: &mut FrameRow) -> Result<()> {
+        let (eye, dir) = (Vec3::from(obs.eye), Vec3::from(obs.dir));
+        let t = Instant::now();
+        let frustum = Frustum::new(eye, dir, Vec3::Y, obs.half_fov_x, obs.half_fov_y);
+        let cache = &self.cache;
+        let stab_segments = self.model.header.cells.as_ref().map(|c| &c.stab_segments);
+        let stab = |cell: u32| match stab_segments
+            .and_then(|s| s.get(cell as usize))
+            .and_then(|&s| cache.get(s))
+        {
+            Some(Resident::Stab(l)) => Some(l.clone()),
+            _ => None,
+        };
+        let vis = view::visible(
+            self.model.graph.as_ref(),
+            &stab,
+            &self.model.bounds,
+            &frustum,
+        );
+        row.visibility_s = t.elapsed().as_secs_f64();
+        row.visible_cells = vis.cells;
+        row.visible_objects = vis.objects.len() as u32;
+        row.visibility_fallback = vis.fallback;
+
+        let t = Instant::now();
+        let camera = self.camera(eye, dir);
+        let vp = camera.view_proj(r.aspect());
+        let resident = |s: u32| matches!(cache.get(s), Some(Resident::Mesh(_)));
+        let viewpoint = view::Viewpoint {
+            view_proj: vp,
+            eye,
+            dir,
+            size: self.cfg.size,
+            half_fov: obs.half_fov_x,
+        };
+        let cands = view::candidates(&self.model.header, &vis.objects, &viewpoint, &resident);
+        let model = self.online.apply(&self.cost);
+        let decided = self.elider.choose(&cands, &model, self.last_frame_s);
+        row.elision_s = t.elapsed().as_secs_f64();
+        row.predicted_s = decided.predicted_s;
+        row.lods_skipped = decided.lods_skipped;
+        row.objects_skipped = decided.objects_skipped;
+
+        let header = &self.model.header;
+        let mut draws = Vec::with_capacity(cands.len());
+        let mut touched = Vec::new();
+        for (c, choice) in cands.iter().zip(&decided.choices) {
+            let inst = &header.instances[c.id as usize];
+            let lods = header.lods_of(inst);
+            touched.extend(lods.iter().map(|l| l.segment).filter(|&s| resident(s)));
+            let Some(l) = choice.lod else { continue };
+            if let Some(Resident::Mesh(mesh)) = cache.get(lods[l].segment) {
+                let color = header
+                    .materials
+                    .get(inst.material as usize)
+                    .map_or([1.0; 4], |m| m.base_color);
+                draws.push(Draw {
+                    mesh,
+                    transform: Mat4::from_cols_array(&inst.transform),
+                    color,
+                });
+            }
+        }
+        let timing = r.render(&camera, &draws)?;
+        row.render_s = timing.total_s;
+        row.drawn_objects = timing.draws;
+        row.drawn_triangles = timing.triangles;
+        // §5.2.3: what is needed now moves to the head of the cache.
+        let eye_stab = vis
+            .eye_cell
+            .and_then(|c| stab_segments.and_then(|s| s.get(c as usize)).copied());
+        for s in touched.into_iter().chain(eye_stab) {
+            self.cache.touch(s);
+        }
+        row.resident_segments = self.cache.len() as u32;
+        row.resident_bytes = self.cache.bytes();
+        Ok(())
+    }
+
+    fn camera(&self, eye: Vec3, dir: Vec3) -> Camera {
+        let far = self.model.header.bounds.size().length().max(10.0) * 1.5;
+        Camera {
+            eye,
+            target: eye + dir,
+            up: Vec3::Y,
+            fovy: self.cfg.fovy,
+            near: 0.05,
+            far,
+        }
+    }
+
+    fn publish(&self, io: &IoStage, frame: u64, observer: Observer) {
+        let held = self.cache.ids().collect();
+        let _ = io.state.send(Some(FrameState {
+            frame,
+            observer,
+            held,
+            consumed: self.consumed,
+        }));
+    }
+
+    fn save_png(&self, r: &mut Renderer, frame: u64) -> Result<()> {
+        let Some(out) = &self.cfg.out else {
+            return Ok(());
+        };
+        let img = r.read_pixels()?;
+        let p = out.join("frames").join(format!("frame_{frame:05}.png"));
+        img.save(&p)
+            .with_context(|| format!("writing {}", p.display()))
+    }
+
+    fn finish(&self, r: &Renderer, rows: &[FrameRow], wall_s: f64) -> Result<WalkSummary> {
+        let col =
+            |f: &dyn Fn(&FrameRow) -> f64| Series::of(&rows.iter().map(f).collect::<Vec<_>>());
+        let drawn = col(&|r| r.drawn_triangles as f64);
+        let s = WalkSummary {
+            adapter: r.adapter_info(),
+            server: self.cfg.server.clone(),
+            model: self.model.header.name.clone(),
+            database_id: self.model.database_id.clone(),
+            path: self.cfg.path.kind.clone(),
+            path_hash: format!("{:016x}", self.cfg.path.hash()),
+            elision: self.cfg.elision.to_string(),
+            budget_s: self.cfg.budget_s,
+            frames: rows.len() as u64,
+            frame_s: col(&|r| r.frame_s),
+            render_s: col(&|r| r.render_s),
+            frames_over_budget: rows
+                .iter()
+                .filter(|r| r.frame_s > self.cfg.budget_s)
+                .count() as u64,
+            lods_skipped: col(&|r| r.lods_skipped as f64),
+            objects_skipped: col(&|r| r.objects_skipped as f64),
+            visible_objects: col(&|r| r.visible_objects as f64),
+            drawn_triangles: drawn,
+            model_triangles: self.model.model_triangles,
+            drawn_fraction: drawn.mean / self.model.model_triangles.max(1) as f64,
+            visibility_fallback_frames: rows.iter().filter(|r| r.visibility_fallback).count()
+                as u64,
+            cache_budget: self.cache.budget(),
+            cache_peak_bytes: self.cache.peak_bytes(),
+            evictions: self.cache.evictions(),
+            segments_read: self.segments_read,
+            bytes_read: self.bytes_read,
+            fetch_latency_s: Series::of(&self.latencies),
+            io_failures: self.failures,
+            cost_model: self.cost,
+            cost_factor: self.online.factor(),
+            wall_s,
+        };
+        if let Some(out) = &self.cfg.out {
+            write_csv(&out.join("frames.csv"), rows).context("writing frames.csv")?;
+            let json = serde_json::to_vec_pretty(&s)?;
+            std::fs::write(out.join("summary.json"), json).context("writing summary.json")?;
+        }
+        Ok(s)
+    }
+}

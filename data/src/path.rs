@@ -1,0 +1,326 @@
+//! Observer paths: timed keyframes (eye, view direction) that walkthroughs and benchmarks replay
+//! frame by frame, and generators for standard paths through the cells of any model
+//! (Funkhouser §7 replays recorded paths; DESIGN §5 `portico path --kind tour|spin|revisit`).
+
+use crate::cells::CellGraph;
+use glam::Vec3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+use std::collections::{HashMap, VecDeque};
+
+/// One keyframe.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Keyframe {
+    /// Seconds from the start.
+    pub t: f32,
+    /// Eye position.
+    pub eye: [f32; 3],
+    /// View direction (unit length).
+    pub dir: [f32; 3],
+}
+
+/// A timed camera path (JSON on disk).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CameraPath {
+    /// What made it (`tour`, `spin`, `revisit`, `recorded`).
+    pub kind: String,
+    /// Keyframes in time order.
+    pub keyframes: Vec<Keyframe>,
+}
+
+/// The kinds of standard paths.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PathKind {
+    /// Walks between random rooms along portal chains.
+    Tour,
+    /// Turns on the spot in one room (everything visible from one cell, at every angle).
+    Spin,
+    /// A tour out and the same way back (tests how well the cache keeps what it saw).
+    Revisit,
+}
+
+impl CameraPath {
+    /// Length in seconds.
+    pub fn duration(&self) -> f32 {
+        self.keyframes.last().map_or(0.0, |k| k.t)
+    }
+
+    /// Eye and view direction at time `t` (clamped to the path), interpolated linearly.
+    pub fn sample(&self, t: f32) -> (Vec3, Vec3) {
+        let k = &self.keyframes;
+        let Some(first) = k.first() else {
+            return (Vec3::ZERO, Vec3::NEG_Z);
+        };
+        let i = k.partition_point(|f| f.t <= t);
+        if i == 0 {
+            return (first.eye.into(), first.dir.into());
+        }
+        if i >= k.len() {
+            let l = k[k.len() - 1];
+            return (l.eye.into(), l.dir.into());
+        }
+        let (a, b) = (k[i - 1], k[i]);
+        let s = ((t - a.t) / (b.t - a.t).max(1e-6)).clamp(0.0, 1.0);
+        let eye = Vec3::from(a.eye).lerp(b.eye.into(), s);
+        let dir = Vec3::from(a.dir).lerp(b.dir.into(), s);
+        (eye, dir.try_normalize().unwrap_or(Vec3::from(b.dir)))
+    }
+
+    /// Checks that times increase and every number is finite.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.keyframes.is_empty() {
+            return Err("the path has no keyframes".into());
+        }
+        for (i, k) in self.keyframes.iter().enumerate() {
+            let finite = k
+                .eye
+                .iter()
+                .chain(&k.dir)
+                .chain([&k.t])
+                .all(|x| x.is_finite());
+            if !finite {
+                return Err(format!("keyframe {i} has a non-finite number"));
+            }
+            if i > 0 && k.t < self.keyframes[i - 1].t {
+                return Err(format!("keyframe {i} goes back in time"));
+            }
+        }
+        Ok(())
+    }
+
+    /// A hash of the path (for reports: which path a figure was measured on).
+    pub fn hash(&self) -> u64 {
+        xxhash_rust::xxh3::xxh3_64(&serde_json::to_vec(self).unwrap_or_default())
+    }
+}
+
+/// Makes a standard path through the live cells of `graph`, walking at `speed` m/s and turning
+/// at most `turn` rad/s.
+pub fn generate(
+    graph: &CellGraph,
+    kind: PathKind,
+    legs: usize,
+    seed: u64,
+    speed: f32,
+    turn: f32,
+) -> Option<CameraPath> {
+    let live: Vec<u32> = (0..graph.cells.len() as u32)
+        .filter(|&c| graph.cells[c as usize].live)
+        .collect();
+    if live.is_empty() {
+        return None;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let (kind_name, points) = match kind {
+        PathKind::Tour => ("tour", tour_points(graph, &live, legs, &mut rng)),
+        PathKind::Revisit => {
+            let mut p = tour_points(graph, &live, legs.div_ceil(2), &mut rng);
+            let back: Vec<Vec3> = p.iter().rev().skip(1).copied().collect();
+            p.extend(back);
+            ("revisit", p)
+        }
+        PathKind::Spin => {
+            let c = biggest_cell(graph, &live);
+            return Some(spin(graph.cells[c as usize].bounds.center(), turn));
+        }
+    };
+    Some(timed(kind_name, &points, speed.max(0.01), turn.max(0.01)))
+}
+
+/// Random rooms joined by their shortest portal chains, through portal centres.
+fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rng) -> Vec<Vec3> {
+    // Start in a roomy cell so the first frames see something.
+    let mut at = biggest_cell(graph, live);
+    let mut points = vec![graph.cells[at as usize].bounds.center()];
+    for _ in 0..legs {
+        let target = live[rng.random_range(0..live.len())];
+        let Some(chain) = portal_chain(graph, at, target) else {
+            continue;
+        };
+        points.extend(
+            chain
+                .iter()
+                .map(|&p| graph.portals[p as usize].rect.center()),
+        );
+        points.push(graph.cells[target as usize].bounds.center());
+        at = target;
+    }
+    points
+}
+
+fn biggest_cell(graph: &CellGraph, live: &[u32]) -> u32 {
+    let volume = |c: u32| {
+        let s = graph.cells[c as usize].bounds.size();
+        s.x * s.y.min(3.0) * s.z
+    };
+    live.iter()
+        .copied()
+        .max_by(|&a, &b| volume(a).total_cmp(&volume(b)))
+        .unwrap_or(live[0])
+}
+
+/// Keyframes along the points at `speed`, looking along the horizontal direction of travel,
+/// pausing at corners long enough to turn at `turn` rad/s.
+fn timed(kind: &str, points: &[Vec3], speed: f32, turn: f32) -> CameraPath {
+    let mut keyframes = Vec::new();
+    let mut t = 0.0f32;
+    let mut dir = Vec3::X;
+    for w in points.windows(2) {
+        let step = w[1] - w[0];
+        let flat = Vec3::new(step.x, 0.0, step.z);
+        let new_dir = if flat.length() > 1e-3 {
+            flat.normalize()
+        } else {
+            dir
+        };
+        if keyframes.is_empty() {
+            dir = new_dir;
+        }
+        // Turn on the spot, then walk.
+        let angle = dir.angle_between(new_dir);
+        if angle > 1e-3 || keyframes.is_empty() {
+            keyframes.push(Keyframe {
+                t,
+                eye: w[0].into(),
+                dir: dir.into(),
+            });
+            t += angle / turn;
+            dir = new_dir;
+        }
+        keyframes.push(Keyframe {
+            t,
+            eye: w[0].into(),
+            dir: dir.into(),
+        });
+        t += step.length() / speed;
+    }
+    if let Some(last) = points.last() {
+        keyframes.push(Keyframe {
+            t,
+            eye: (*last).into(),
+            dir: dir.into(),
+        });
+    }
+    CameraPath {
+        kind: kind.into(),
+        keyframes,
+    }
+}
+
+/// One full turn on the spot.
+fn spin(eye: Vec3, turn: f32) -> CameraPath {
+    let steps = 16;
+    let period = std::f32::consts::TAU / turn.max(0.01);
+    let keyframes = (0..=steps)
+        .map(|i| {
+            let a = std::f32::consts::TAU * i as f32 / steps as f32;
+            Keyframe {
+                t: period * i as f32 / steps as f32,
+                eye: eye.into(),
+                dir: [a.cos(), 0.0, a.sin()],
+            }
+        })
+        .collect();
+    CameraPath {
+        kind: "spin".into(),
+        keyframes,
+    }
+}
+
+/// Portals along a shortest cell path (breadth-first) from `from` to `to`, if connected.
+pub fn portal_chain(graph: &CellGraph, from: u32, to: u32) -> Option<Vec<u32>> {
+    let mut came: HashMap<u32, (u32, u32)> = HashMap::new();
+    let mut queue = VecDeque::from([from]);
+    while let Some(c) = queue.pop_front() {
+        if c == to {
+            let mut chain = Vec::new();
+            let mut cur = to;
+            while cur != from {
+                let (prev, portal) = came[&cur];
+                chain.push(portal);
+                cur = prev;
+            }
+            chain.reverse();
+            return Some(chain);
+        }
+        for &p in &graph.cells[c as usize].portals {
+            let n = graph.portals[p as usize].other(c);
+            if n != from && !came.contains_key(&n) {
+                came.insert(n, (c, p));
+                queue.push_back(n);
+            }
+        }
+    }
+    None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn path() -> CameraPath {
+        CameraPath {
+            kind: "test".into(),
+            keyframes: vec![
+                Keyframe {
+                    t: 0.0,
+                    eye: [0.0; 3],
+                    dir: [1.0, 0.0, 0.0],
+                },
+                Keyframe {
+                    t: 2.0,
+                    eye: [2.0, 0.0, 0.0],
+                    dir: [1.0, 0.0, 0.0],
+                },
+                Keyframe {
+                    t: 3.0,
+                    eye: [2.0, 0.0, 0.0],
+                    dir: [0.0, 0.0, 1.0],
+                },
+            ],
+        }
+    }
+
+    #[test]
+    fn sampling_interpolates_and_clamps() {
+        let p = path();
+        assert_eq!(p.duration(), 3.0);
+        assert!((p.sample(1.0).0 - Vec3::new(1.0, 0.0, 0.0)).length() < 1e-6);
+        assert!((p.sample(-5.0).0).length() < 1e-6);
+        assert!((p.sample(9.0).1 - Vec3::Z).length() < 1e-6);
+        let mid = p.sample(2.5).1;
+        assert!((mid.length() - 1.0).abs() < 1e-5 && mid.x > 0.5 && mid.z > 0.5);
+    }
+
+    #[test]
+    fn validation_rejects_bad_paths() {
+        let mut p = path();
+        assert!(p.validate().is_ok());
+        p.keyframes[1].t = -1.0;
+        assert!(p.validate().unwrap_err().contains("back in time"));
+        p.keyframes[1].t = f32::NAN;
+        assert!(p.validate().is_err());
+        assert!(
+            CameraPath {
+                kind: "x".into(),
+                keyframes: vec![]
+            }
+            .validate()
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn timed_paths_respect_speed_and_turn_rate() {
+        let pts = [
+            Vec3::ZERO,
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(3.0, 0.0, 4.0),
+        ];
+        let p = timed("t", &pts, 1.0, std::f32::consts::FRAC_PI_2);
+        // 3 m + a 90° turn at 90°/s + 4 m, at 1 m/s.
+        assert!((p.duration() - 8.0).abs() < 1e-4, "{}", p.duration());
+        assert!(p.validate().is_ok());
+    }
+}

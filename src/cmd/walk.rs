@@ -1,0 +1,197 @@
+//! `portico walk --server URL (--path FILE | --path-kind tour) --budget-ms 50 --cache-mb 64
+//! --size 640x480 --elision optimize --out DIR`: the headless walkthrough client (DESIGN §5).
+
+use crate::progress::Bars;
+use anyhow::{Context, Result, bail};
+use portico_client::elision::Algorithm;
+use portico_client::net::{Remote, cells_blocking};
+use portico_client::policy::parse_policy;
+use portico_client::walk::{WalkConfig, WalkSummary, walk};
+use portico_data::path::{CameraPath, PathKind, generate};
+use portico_protocol::Policy;
+use std::path::PathBuf;
+
+/// Arguments of `portico walk`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Server base URL.
+    #[arg(long, default_value = "http://127.0.0.1:7878")]
+    server: String,
+    /// Bearer token (also read from PORTICO_TOKEN).
+    #[arg(long, env = "PORTICO_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// A path JSON file (from `portico path`).
+    #[arg(long, conflicts_with = "path_kind")]
+    path: Option<PathBuf>,
+    /// Or generate a standard path from the server's cells.
+    #[arg(long, value_enum)]
+    path_kind: Option<crate::cmd::path::Kind>,
+    /// Legs of a generated tour.
+    #[arg(long, default_value_t = 4)]
+    legs: usize,
+    /// Seed of a generated path.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Frame-time budget in milliseconds.
+    #[arg(long, default_value_t = 50.0)]
+    budget_ms: f64,
+    /// Cache budget in MB (MiB).
+    #[arg(long, default_value_t = 64)]
+    cache_mb: u64,
+    /// Image size WxH.
+    #[arg(long, default_value = "640x480")]
+    size: String,
+    /// Detail elision: none, static, feedback, optimize.
+    #[arg(long, default_value = "optimize")]
+    elision: Algorithm,
+    /// Prefetch policy, e.g. depth=16,gran=object,range=direction,look=any,read=1m.
+    #[arg(long, default_value = "")]
+    policy: String,
+    /// Output directory for frames.csv, summary.json and PNGs.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Save every N-th frame as PNG (0 = none).
+    #[arg(long, default_value_t = 0)]
+    frames_png: u64,
+    /// Stop after this many frames.
+    #[arg(long)]
+    max_frames: Option<u64>,
+    /// Run frames back to back instead of holding each to the budget.
+    #[arg(long)]
+    no_pace: bool,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    fov: f32,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Parses `WxH`.
+pub fn parse_size(s: &str) -> Result<(u32, u32)> {
+    let (w, h) = s
+        .split_once(['x', 'X'])
+        .with_context(|| format!("size {s:?} is not WxH"))?;
+    let (w, h): (u32, u32) = (w.parse()?, h.parse()?);
+    if !(16..=8192).contains(&w) || !(16..=8192).contains(&h) {
+        bail!("size {s:?}: each side must be 16..=8192 pixels");
+    }
+    Ok((w, h))
+}
+
+/// Loads or generates the path.
+pub fn load_path(
+    server: &str,
+    token: Option<String>,
+    file: Option<&PathBuf>,
+    kind: Option<PathKind>,
+    legs: usize,
+    seed: u64,
+) -> Result<CameraPath> {
+    if let Some(f) = file {
+        let text = std::fs::read(f).with_context(|| format!("reading {}", f.display()))?;
+        let p: CameraPath = serde_json::from_slice(&text)
+            .with_context(|| format!("{}: not a path JSON", f.display()))?;
+        p.validate()
+            .map_err(anyhow::Error::msg)
+            .with_context(|| f.display().to_string())?;
+        return Ok(p);
+    }
+    let graph = cells_blocking(&Remote::new(server, token)?)?;
+    generate(
+        &graph,
+        kind.unwrap_or(PathKind::Tour),
+        legs,
+        seed,
+        1.5,
+        90f32.to_radians(),
+    )
+    .context("the model has no live cells to walk through")
+}
+
+/// Runs the walk with a progress bar and prints the summary.
+pub fn run(a: Args) -> Result<()> {
+    let path = load_path(
+        &a.server,
+        a.token.clone(),
+        a.path.as_ref(),
+        a.path_kind.map(Into::into),
+        a.legs,
+        a.seed,
+    )?;
+    let policy = parse_policy(&a.policy, Policy::default()).map_err(anyhow::Error::msg)?;
+    let cfg = WalkConfig {
+        server: a.server,
+        token: a.token,
+        path,
+        budget_s: a.budget_ms.max(1.0) / 1e3,
+        cache_bytes: a.cache_mb << 20,
+        size: parse_size(&a.size)?,
+        elision: a.elision,
+        policy,
+        out: a.out,
+        png_every: a.frames_png,
+        max_frames: a.max_frames,
+        pace: !a.no_pace,
+        fovy: a.fov.clamp(10.0, 150.0).to_radians(),
+        max_speed: 2.0,
+        max_turn: 2.0,
+    };
+    let bars = Bars::new();
+    let mut started = false;
+    let summary = walk(&cfg, &mut |done, total| {
+        if !started {
+            bars.start("walk", total);
+            started = true;
+        }
+        bars.inc(1);
+        let _ = done;
+    })?;
+    bars.finish();
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        print_summary(&summary);
+    }
+    Ok(())
+}
+
+/// A short human summary.
+pub fn print_summary(s: &WalkSummary) {
+    let ms = |x: f64| x * 1e3;
+    println!(
+        "walk: {} frames of {} on {} ({})",
+        s.frames, s.model, s.adapter, s.elision
+    );
+    println!(
+        "  frame time ms: mean {:.1} sd {:.1} p95 {:.1} p99 {:.1} max {:.1} (budget {:.0}; {} over)",
+        ms(s.frame_s.mean),
+        ms(s.frame_s.sd),
+        ms(s.frame_s.p95),
+        ms(s.frame_s.p99),
+        ms(s.frame_s.max),
+        ms(s.budget_s),
+        s.frames_over_budget
+    );
+    println!(
+        "  drawn: {:.0} triangles mean ({:.3}% of {}), visible objects {:.1} mean",
+        s.drawn_triangles.mean,
+        s.drawn_fraction * 100.0,
+        s.model_triangles,
+        s.visible_objects.mean
+    );
+    println!(
+        "  skipped per frame: LODs {:.2} mean / {:.0} max, objects {:.2} mean / {:.0} max",
+        s.lods_skipped.mean, s.lods_skipped.max, s.objects_skipped.mean, s.objects_skipped.max
+    );
+    println!(
+        "  cache: peak {:.1} of {:.1} MB, {} evictions; read {} segments, {:.1} MB; fetch latency p50 {:.1} ms p99 {:.1} ms",
+        s.cache_peak_bytes as f64 / 1e6,
+        s.cache_budget as f64 / 1e6,
+        s.evictions,
+        s.segments_read,
+        s.bytes_read as f64 / 1e6,
+        ms(s.fetch_latency_s.p50),
+        ms(s.fetch_latency_s.p99)
+    );
+}
