@@ -10,3 +10,5 @@ pub mod render;
 pub mod stats;
 pub mod view;
 pub mod walk;
+pub mod bench;
+pub mod loadtest;
