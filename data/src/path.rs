@@ -105,9 +105,20 @@ pub fn generate(
     speed: f32,
     turn: f32,
 ) -> Option<CameraPath> {
-    let live: Vec<u32> = (0..graph.cells.len() as u32)
-        .filter(|&c| graph.cells[c as usize].live)
+    // Rooms to visit: live cells an observer can stand in (not the thin openings of doors and
+    // windows, which are live too but lead nowhere worth seeing).
+    let roomy = |c: u32| {
+        let s = graph.cells[c as usize].bounds.size();
+        s.x >= 1.0 && s.z >= 1.0 && s.y >= 2.0
+    };
+    let mut live: Vec<u32> = (0..graph.cells.len() as u32)
+        .filter(|&c| graph.cells[c as usize].live && roomy(c))
         .collect();
+    if live.is_empty() {
+        live = (0..graph.cells.len() as u32)
+            .filter(|&c| graph.cells[c as usize].live)
+            .collect();
+    }
     if live.is_empty() {
         return None;
     }
@@ -138,11 +149,18 @@ fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rn
         let Some(chain) = portal_chain(graph, at, target) else {
             continue;
         };
-        points.extend(
-            chain
-                .iter()
-                .map(|&p| graph.portals[p as usize].rect.center()),
-        );
+        // Walk straight through each opening: a point a little before and a little after it,
+        // so the observer turns inside rooms, never standing in a portal's plane.
+        let mut from = *points.last().unwrap_or(&Vec3::ZERO);
+        for &p in &chain {
+            let portal = &graph.portals[p as usize];
+            let c = portal.rect.center();
+            let mut n = Vec3::ZERO;
+            let a = portal.axis as usize;
+            n[a] = (c[a] - from[a]).signum();
+            points.extend([c - n * 0.4, c + n * 0.4]);
+            from = c + n * 0.4;
+        }
         points.push(graph.cells[target as usize].bounds.center());
         at = target;
     }

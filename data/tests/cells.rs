@@ -130,6 +130,28 @@ fn two_rooms_and_a_door_see_each_other() {
 }
 
 #[test]
+fn an_eye_standing_in_a_doorway_sees_through_it() {
+    // Paths pass through portal centres: the eye then lies exactly in a portal's plane.
+    let boxes = wall_with_door(4.0, (4.0, 5.0));
+    let objects = [bx([7.0, 0.0, 4.0], [8.0, 1.0, 5.0])];
+    let bounds = bx([0.0, 0.0, 0.0], [8.2, 3.0, 10.0]);
+    let (g, stabs) = quiet_precompute(&bounds, &boxes, &objects);
+    let far_room = g.locate(Vec3::new(7.5, 0.5, 4.5)).unwrap();
+    for x in [4.0f32, 4.2] {
+        let eye = Vec3::new(x, 1.5, 4.5);
+        let view = Frustum::new(eye, Vec3::X, Vec3::Y, 0.5, 0.4);
+        let reached = eye_to_cell(&g, &view);
+        assert!(
+            reached.iter().any(|r| r.cell == far_room),
+            "eye at x = {x}: {reached:?}"
+        );
+        let cell = g.locate(eye).unwrap();
+        let seen = eye_to_object(&reached, &stabs[cell as usize], &objects);
+        assert_eq!(seen, vec![0], "eye at x = {x}");
+    }
+}
+
+#[test]
 fn a_model_without_occluders_falls_back_to_an_open_grid() {
     let objects: Vec<Aabb> = (0..20)
         .map(|i| {

@@ -9,7 +9,7 @@
 //!   and FTO rows of Table 4.1).
 
 use super::polytope::{Plane, clip_polygon};
-use super::{CellGraph, StabList};
+use super::{CellGraph, StabList, touches};
 use crate::geometry::Aabb;
 use glam::Vec3;
 
@@ -97,9 +97,21 @@ pub fn eye_to_cell(graph: &CellGraph, view: &Frustum) -> Vec<Reached> {
             if poly.len() < 3 || polygon_area(&poly) < 1e-8 {
                 continue;
             }
-            let narrowed = wedge_through(view.eye, &poly);
+            let mut narrowed = wedge_through(view.eye, &poly);
             if narrowed.is_empty() {
-                continue; // the eye lies in the portal's plane: nothing seen through it
+                // The eye lies in the portal's plane. Standing in the opening it sees the
+                // whole next cell through the current wedge; beside the opening it sees nothing
+                // through it, and the wedge may stay wide (conservative either way).
+                if !touches(
+                    &portal.rect,
+                    &Aabb {
+                        min: view.eye.into(),
+                        max: view.eye.into(),
+                    },
+                ) {
+                    continue;
+                }
+                narrowed = wedge.clone();
             }
             out.push(Reached {
                 cell: next,
