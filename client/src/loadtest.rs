@@ -1,1 +1,0 @@
-//! `portico loadtest` (issue 7): simulated clients against a real server. Being written.

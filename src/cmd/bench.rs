@@ -1,0 +1,136 @@
+//! `portico bench --db FILE.portico (--path FILE | --path-kind tour [--legs L --seed S])
+//! --budget-ms B [--size 320x240] [--max-frames F] [--algorithms regular,none,static,feedback,optimize]
+//! --out DIR`: frame rate and image fidelity of the detail elision algorithms (DESIGN §7,
+//! Funkhouser Table 4.3 / Fig. 4.22, RRB §5.2-5.3). The work is `portico_client::bench`.
+
+use crate::progress::Bars;
+use anyhow::{Context, Result};
+use portico_client::bench::{BenchConfig, BenchSummary, RunKind, report};
+use portico_data::Database;
+use portico_data::path::{CameraPath, PathKind, generate};
+use std::path::PathBuf;
+
+/// Arguments of `portico bench`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// The display database.
+    #[arg(long)]
+    db: PathBuf,
+    /// A path JSON file (from `portico path`).
+    #[arg(long, conflicts_with = "path_kind")]
+    path: Option<PathBuf>,
+    /// Or generate a standard path from the model's cells.
+    #[arg(long, value_enum)]
+    path_kind: Option<crate::cmd::path::Kind>,
+    /// Legs of a generated tour.
+    #[arg(long, default_value_t = 4)]
+    legs: usize,
+    /// Seed of a generated path.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Frame-time budget of the elision algorithms, milliseconds.
+    #[arg(long, default_value_t = 50.0)]
+    budget_ms: f64,
+    /// Image size WxH.
+    #[arg(long, default_value = "320x240")]
+    size: String,
+    /// Stop after this many frames.
+    #[arg(long)]
+    max_frames: Option<u64>,
+    /// Runs, comma-separated: regular, none, static, feedback, optimize, coarsest (regular is
+    /// always run first: it is the fidelity reference).
+    #[arg(long, default_value = "regular,none,static,feedback,optimize")]
+    algorithms: String,
+    /// Path time between frames, milliseconds (frame i shows the path at i x this).
+    #[arg(long, default_value_t = 50.0)]
+    frame_step_ms: f64,
+    /// Side of the area of interest around each critical vertex, 1-10 pixels (RRB §5.3.4).
+    #[arg(long, default_value_t = 5)]
+    patch_px: u32,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    fov: f32,
+    /// Output directory (summary.json, report.md, frames.csv, PNG plots).
+    #[arg(long)]
+    out: PathBuf,
+    /// Print the summary as JSON instead of the table.
+    #[arg(long)]
+    json: bool,
+}
+
+/// Loads the path file or generates a standard path through the database's cells.
+fn load_path(a: &Args) -> Result<CameraPath> {
+    if let Some(f) = &a.path {
+        let text = std::fs::read(f).with_context(|| format!("reading {}", f.display()))?;
+        let p: CameraPath = serde_json::from_slice(&text)
+            .with_context(|| format!("{}: not a path JSON", f.display()))?;
+        p.validate()
+            .map_err(anyhow::Error::msg)
+            .with_context(|| f.display().to_string())?;
+        return Ok(p);
+    }
+    let db = Database::open(&a.db).with_context(|| format!("opening {}", a.db.display()))?;
+    let graph = db.cell_graph()?.with_context(|| {
+        format!(
+            "{}: built without cells; give a path file with --path",
+            a.db.display()
+        )
+    })?;
+    let kind = a.path_kind.map_or(PathKind::Tour, Into::into);
+    generate(&graph, kind, a.legs, a.seed, 1.5, 90f32.to_radians())
+        .with_context(|| format!("{}: no live cells to walk through", a.db.display()))
+}
+
+/// Runs the benchmark with a progress bar and prints the table.
+pub fn run(a: Args) -> Result<()> {
+    let path = load_path(&a)?;
+    let mut cfg = BenchConfig::new(a.db.clone(), path, a.budget_ms / 1e3, a.out.clone());
+    cfg.size = crate::cmd::walk::parse_size(&a.size)?;
+    cfg.max_frames = a.max_frames;
+    cfg.algorithms = RunKind::parse_list(&a.algorithms)?;
+    cfg.dt_s = a.frame_step_ms / 1e3;
+    cfg.patch_px = a.patch_px;
+    cfg.fovy = a.fov.clamp(10.0, 150.0).to_radians();
+    let bars = Bars::new();
+    let mut started = false;
+    let summary = portico_client::bench::run(&cfg, &mut |_, total| {
+        if !started {
+            bars.start("bench", total);
+            started = true;
+        }
+        bars.inc(1);
+    })?;
+    bars.finish();
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        print_summary(&summary, &a.out);
+    }
+    Ok(())
+}
+
+/// The table and where the files are.
+fn print_summary(s: &BenchSummary, out: &std::path::Path) {
+    println!(
+        "bench: {} ({}), {} frames at {}x{}, budget {:.0} ms, on {}",
+        s.model.name,
+        s.model.database_id,
+        s.parameters.frames,
+        s.parameters.size.0,
+        s.parameters.size.1,
+        s.parameters.budget_s * 1e3,
+        s.adapter
+    );
+    println!("{}", report::self_test_line(s));
+    println!();
+    print!("{}", report::table(&s.runs));
+    println!();
+    println!(
+        "critical vertices: {} of {} ({:.1} %), {:.0} visible per frame",
+        s.critical.counts.critical,
+        s.critical.counts.vertices,
+        s.critical.fraction * 100.0,
+        s.critical.visible_per_frame.mean
+    );
+    println!("wrote {} in {:.1} s", out.display(), s.wall_s);
+}

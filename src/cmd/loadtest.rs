@@ -1,0 +1,171 @@
+//! `portico loadtest --server URL --clients N (--path FILE | --path-kind tour) [--policy SPEC |
+//! --sweep [reduced|full|depth|gran|cull]] [--link rtt=20ms,rate=100mbit] [--cache-mb 64]
+//! [--budget-ms 50] [--max-frames F] --out DIR`: simulated clients against a real server, to
+//! measure prefetch policies against demand fetch and an oracle (DESIGN §7, Funkhouser §5.3).
+
+use crate::progress::Bars;
+use anyhow::{Context, Result};
+use portico_client::loadtest::{Link, LoadtestConfig, LoadtestSummary, grid, run as run_loadtest};
+use portico_client::policy::{parse_policy, policy_spec};
+use portico_protocol::Policy;
+use std::path::PathBuf;
+
+/// Frames per client of a sweep's runs unless `--max-frames` says otherwise (20 s at 50 ms:
+/// the 15 runs of the reduced sweep take about five minutes).
+const SWEEP_FRAMES: u64 = 400;
+
+/// Arguments of `portico loadtest`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Server base URL.
+    #[arg(long, default_value = "http://127.0.0.1:7878")]
+    server: String,
+    /// Bearer token (also read from PORTICO_TOKEN).
+    #[arg(long, env = "PORTICO_TOKEN", hide_env_values = true)]
+    token: Option<String>,
+    /// Simulated clients.
+    #[arg(long, default_value_t = 8)]
+    clients: usize,
+    /// A path JSON file (from `portico path`).
+    #[arg(long, conflicts_with = "path_kind")]
+    path: Option<PathBuf>,
+    /// Or generate a standard path from the server's cells.
+    #[arg(long, value_enum)]
+    path_kind: Option<crate::cmd::path::Kind>,
+    /// Legs of a generated tour.
+    #[arg(long, default_value_t = 4)]
+    legs: usize,
+    /// Seed of a generated path.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Prefetch policy, e.g. depth=16,gran=object,range=direction,look=any,read=4m,size=16.
+    #[arg(long, default_value = "")]
+    policy: String,
+    /// Funkhouser's policy grid instead of one policy: reduced (13 runs, the default), full
+    /// (144), depth (Table 5.1), gran (Table 5.3) or cull (Tables 5.5-5.10). Keys of --policy
+    /// that the grid does not vary (read, size) still apply.
+    #[arg(long, num_args = 0..=1, default_missing_value = "reduced", value_name = "GRID")]
+    sweep: Option<String>,
+    /// Each client's emulated link.
+    #[arg(long, default_value = "rtt=20ms,rate=100mbit")]
+    link: String,
+    /// Cache budget per client in MB (MiB).
+    #[arg(long, default_value_t = 64)]
+    cache_mb: u64,
+    /// Frame budget (and frame time) in milliseconds.
+    #[arg(long, default_value_t = 50.0)]
+    budget_ms: f64,
+    /// Frames per client (default: one pass over the path; with --sweep, 400).
+    #[arg(long)]
+    max_frames: Option<u64>,
+    /// Leave out the demand-fetch and oracle baselines.
+    #[arg(long)]
+    no_baselines: bool,
+    /// Output directory for summary.json, report.md, frames.csv and the plots.
+    #[arg(long)]
+    out: PathBuf,
+    /// Print the summary as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// The policies to run: one from `--policy`, or the `--sweep` grid on top of it.
+fn policies(a: &Args) -> Result<Vec<(String, Policy)>> {
+    let base = parse_policy(&a.policy, Policy::default())
+        .map_err(anyhow::Error::msg)
+        .context("--policy")?;
+    match &a.sweep {
+        Some(name) => Ok(grid(name, base).context("--sweep")?),
+        None => Ok(vec![(policy_spec(&base), base)]),
+    }
+}
+
+/// Runs the load test with a progress bar and prints the summary.
+pub fn run(a: Args) -> Result<()> {
+    let link = Link::parse(&a.link).context("--link")?;
+    let policies = policies(&a)?;
+    if !(1.0..=10_000.0).contains(&a.budget_ms) {
+        anyhow::bail!("--budget-ms must be 1..=10000, not {}", a.budget_ms);
+    }
+    let path = crate::cmd::walk::load_path(
+        &a.server,
+        a.token.clone(),
+        a.path.as_ref(),
+        a.path_kind.map(Into::into),
+        a.legs,
+        a.seed,
+    )?;
+    let cfg = LoadtestConfig {
+        server: a.server,
+        token: a.token,
+        clients: a.clients,
+        path,
+        policies,
+        baselines: !a.no_baselines,
+        link,
+        cache_bytes: a.cache_mb << 20,
+        budget_s: a.budget_ms / 1e3,
+        max_frames: a.max_frames.or(a.sweep.as_ref().map(|_| SWEEP_FRAMES)),
+        out: a.out,
+    };
+    let bars = Bars::new();
+    let (mut started, mut shown) = (false, 0u64);
+    let summary = run_loadtest(&cfg, &mut |done, total| {
+        if !started {
+            bars.start("loadtest", total);
+            started = true;
+        }
+        if done > shown {
+            bars.inc(done - shown);
+            shown = done;
+        }
+    })?;
+    bars.finish();
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&summary)?);
+    } else {
+        print_summary(&summary, &cfg.out);
+    }
+    Ok(())
+}
+
+/// A short human summary: one line per run and the prefetch-vs-demand ratio.
+pub fn print_summary(s: &LoadtestSummary, out: &std::path::Path) {
+    println!(
+        "loadtest: {} clients x {} frames on {} ({}), {}, cache {:.0} MB",
+        s.clients,
+        s.frames_per_client,
+        s.model,
+        s.path,
+        s.link_spec,
+        s.cache_bytes as f64 / (1u64 << 20) as f64
+    );
+    println!(
+        "  {:<44} {:>11} {:>9} {:>8} {:>9} {:>9} {:>14}",
+        "run", "LODs skip", "objs skip", "hit", "MB fetch", "MB waste", "lat p50/p99 ms"
+    );
+    for p in &s.policies {
+        println!(
+            "  {:<44} {:>5.2}/{:<5.0} {:>9.2} {:>8.3} {:>9.1} {:>9.1} {:>6.0}/{:<7.0}",
+            p.name,
+            p.lods_skipped_mean,
+            p.lods_skipped_max,
+            p.objects_skipped_mean,
+            p.cache_hit_rate,
+            p.bytes_fetched as f64 / 1e6,
+            p.bytes_wasted as f64 / 1e6,
+            p.latency_p50_s * 1e3,
+            p.latency_p99_s * 1e3
+        );
+    }
+    if let (Some(best), Some(_)) = (s.best_prefetch(), s.get("demand")) {
+        let ratio = |r: Option<f64>| r.map_or("inf".into(), |r| format!("{r:.1}x"));
+        println!(
+            "  best prefetch `{}`: {} fewer LODs skipped than demand fetch ({} smaller LOD deficit)",
+            best.name,
+            ratio(best.lods_skipped_vs_demand),
+            ratio(best.lod_deficit_vs_demand)
+        );
+    }
+    println!("  report: {}", out.join("report.md").display());
+}
