@@ -33,6 +33,12 @@ enum Command {
     Path(cmd::path::Args),
     /// Walk a path through a served model with the headless wgpu client.
     Walk(cmd::walk::Args),
+    /// Simulate many clients against a server and measure the prefetch policy.
+    Loadtest(cmd::loadtest::Args),
+    /// Measure frame rate and image fidelity of the detail elision algorithms.
+    Bench(cmd::bench::Args),
+    /// Generate, build, serve, walk and report on a demo building in one command.
+    Demo(cmd::demo::Args),
 }
 
 fn main() -> ExitCode {
@@ -53,6 +59,9 @@ fn main() -> ExitCode {
         Command::Serve(a) => cmd::serve::run(a),
         Command::Path(a) => cmd::path::run(a),
         Command::Walk(a) => cmd::walk::run(a),
+        Command::Loadtest(a) => cmd::loadtest::run(a),
+        Command::Bench(a) => cmd::bench::run(a),
+        Command::Demo(a) => cmd::demo::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,9 +1,12 @@
 //! One module per subcommand.
 
+pub mod bench;
 pub mod build;
 pub mod cull;
+pub mod demo;
 pub mod generate;
 pub mod inspect;
+pub mod loadtest;
 pub mod path;
 pub mod serve;
 pub mod verify;

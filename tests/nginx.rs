@@ -1,0 +1,263 @@
+//! The scaled-out deployment of `docker/`, without Docker: Debian's nginx with
+//! `docker/nginx.conf.template` in front of three `portico serve` processes on loopback ports.
+//! A client walks through nginx while one replica is killed mid-run; segments come from
+//! nginx's cache on the second read; the WebSocket stream passes the proxy.
+//!
+//! Needs `nginx` on the PATH or in /usr/sbin (`.ci/run` installs it). Without it the test
+//! prints why and passes, unless `CI` is set, where a missing nginx is a failure.
+
+use futures_util::{SinkExt, StreamExt};
+use portico_client::elision::Algorithm;
+use portico_client::walk::{WalkConfig, walk};
+use portico_data::path::{PathKind, generate};
+use portico_protocol::{PROTOCOL_VERSION, Policy, ServerFrame, StreamClient};
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+fn nginx_binary() -> Option<PathBuf> {
+    ["/usr/sbin/nginx", "/usr/local/sbin/nginx", "/usr/bin/nginx"]
+        .iter()
+        .map(PathBuf::from)
+        .find(|p| p.exists())
+}
+
+/// Kills the child when dropped, so a failing test leaves no processes behind.
+struct Proc(Child);
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn portico(args: &[&str]) -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_portico"));
+    c.args(args);
+    c
+}
+
+fn build_tiny(dir: &Path) -> PathBuf {
+    let glb = dir.join("tiny.glb");
+    let db = dir.join("tiny.portico");
+    let gen_ok = portico(&["generate", "--preset", "tiny", "-o", glb.to_str().unwrap()])
+        .status()
+        .unwrap();
+    assert!(gen_ok.success());
+    let build_ok = portico(&["build", glb.to_str().unwrap(), "-o", db.to_str().unwrap()])
+        .status()
+        .unwrap();
+    assert!(build_ok.success());
+    db
+}
+
+/// Starts a replica on a free port; returns it and its address (read from its start-up line).
+fn replica(db: &Path) -> (Proc, String) {
+    let mut child = portico(&["serve", db.to_str().unwrap(), "--listen", "127.0.0.1:0"])
+        .stderr(Stdio::piped())
+        .stdout(Stdio::null())
+        .spawn()
+        .unwrap();
+    let stderr = child.stderr.take().unwrap();
+    let mut line = String::new();
+    BufReader::new(stderr).read_line(&mut line).unwrap();
+    let addr = line.rsplit("http://").next().unwrap().trim().to_string();
+    assert!(
+        addr.starts_with("127.0.0.1:"),
+        "unexpected start-up line {line:?}"
+    );
+    (Proc(child), addr)
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+fn start_nginx(nginx: &Path, dir: &Path, replicas: &[String]) -> (Proc, String) {
+    let template = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/docker/nginx.conf.template"
+    ))
+    .unwrap();
+    let port = free_port();
+    let tmp = dir.join("nginx");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let upstreams: String = replicas
+        .iter()
+        .map(|a| format!("server {a} max_fails=1 fail_timeout=30s; "))
+        .collect();
+    let conf = template
+        .replace("${PORTICO_UPSTREAMS}", &upstreams)
+        .replace("${PORTICO_LISTEN}", &format!("127.0.0.1:{port}"))
+        .replace("${PORTICO_CACHE_DIR}", tmp.join("cache").to_str().unwrap())
+        .replace("${PORTICO_TMP}", tmp.to_str().unwrap());
+    let conf_path = tmp.join("nginx.conf");
+    std::fs::write(&conf_path, conf).unwrap();
+    let child = Command::new(nginx)
+        .args([
+            "-p",
+            tmp.to_str().unwrap(),
+            "-c",
+            conf_path.to_str().unwrap(),
+            "-g",
+            "daemon off;",
+        ])
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let base = format!("http://127.0.0.1:{port}");
+    // Wait until nginx answers (a readiness poll: bounded, no fixed sleep).
+    assert!(
+        wait_healthy(&base),
+        "nginx never answered on {base}; see {}",
+        tmp.join("error.log").display()
+    );
+    (Proc(child), base)
+}
+
+/// Polls `/healthz` through a plain socket until it answers 200 (bounded: about 5 s).
+fn wait_healthy(base: &str) -> bool {
+    use std::io::{Read, Write};
+    let addr = base.trim_start_matches("http://");
+    for _ in 0..500 {
+        if let Ok(mut s) = std::net::TcpStream::connect(addr) {
+            let _ =
+                s.write_all(b"GET /healthz HTTP/1.1\r\nHost: portico\r\nConnection: close\r\n\r\n");
+            let mut buf = [0u8; 12];
+            if s.read_exact(&mut buf).is_ok() && buf.starts_with(b"HTTP/1.1 200") {
+                return true;
+            }
+        }
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    false
+}
+
+#[test]
+fn three_replicas_behind_nginx_survive_losing_one() {
+    let Some(nginx) = nginx_binary() else {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "nginx is not installed but CI is set"
+        );
+        eprintln!("skipping: nginx is not installed (apt-get install nginx-light)");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let db = build_tiny(dir.path());
+    let mut replicas: Vec<(Proc, String)> = (0..3).map(|_| replica(&db)).collect();
+    let addrs: Vec<String> = replicas.iter().map(|(_, a)| a.clone()).collect();
+    let (_nginx, base) = start_nginx(&nginx, dir.path(), &addrs);
+    let rt = tokio::runtime::Runtime::new().unwrap();
+
+    // Immutable segments are served from nginx's cache the second time.
+    rt.block_on(async {
+        let http = reqwest::Client::new();
+        let url = format!("{base}/v1/segments/1");
+        let first = http.get(&url).send().await.unwrap();
+        assert_eq!(first.status(), 200);
+        let bytes = first.bytes().await.unwrap();
+        let second = http.get(&url).send().await.unwrap();
+        assert_eq!(second.headers()["x-cache-status"], "HIT");
+        assert_eq!(second.bytes().await.unwrap(), bytes);
+    });
+
+    // The WebSocket stream passes the proxy.
+    rt.block_on(async {
+        let ws_url = base.replace("http://", "ws://") + "/v1/stream";
+        let (mut ws, _) = tokio_tungstenite::connect_async(&ws_url).await.unwrap();
+        let d = portico_data::Database::open(&db).unwrap();
+        let g = d.cell_graph().unwrap().unwrap();
+        let c = g.cells.iter().find(|c| c.live).unwrap();
+        let eye = [
+            (c.bounds.min[0] + c.bounds.max[0]) / 2.0,
+            1.5,
+            (c.bounds.min[2] + c.bounds.max[2]) / 2.0,
+        ];
+        let hello = StreamClient::Hello {
+            version: PROTOCOL_VERSION,
+            policy: Policy::default(),
+            rate_bytes_per_s: 50 << 20,
+        };
+        let obs = StreamClient::Observer(portico_protocol::Observer {
+            eye,
+            dir: [1.0, 0.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            velocity: [0.0; 3],
+            half_fov_x: 0.6,
+            half_fov_y: 0.45,
+            max_speed: 1.5,
+            max_turn: 1.0,
+        });
+        for m in [hello, obs] {
+            let bytes = portico_protocol::to_bincode(&m).unwrap();
+            ws.send(tokio_tungstenite::tungstenite::Message::Binary(
+                bytes.into(),
+            ))
+            .await
+            .unwrap();
+        }
+        loop {
+            let msg = ws.next().await.expect("stream open").unwrap();
+            if let tokio_tungstenite::tungstenite::Message::Binary(b) = msg
+                && let Ok(ServerFrame::Segment(id, bytes)) =
+                    portico_protocol::parse_server_frame(&b)
+            {
+                assert_eq!(bytes, &d.segment(id).unwrap()[..]);
+                break;
+            }
+        }
+    });
+
+    // A walk through nginx carries on when a replica is killed a third of the way in.
+    let graph = portico_data::Database::open(&db)
+        .unwrap()
+        .cell_graph()
+        .unwrap()
+        .unwrap();
+    let path = generate(&graph, PathKind::Tour, 2, 3, 1.5, 1.5).unwrap();
+    let cfg = WalkConfig {
+        server: base.clone(),
+        token: None,
+        path,
+        budget_s: 0.02,
+        cache_bytes: 32 << 20,
+        size: (64, 48),
+        elision: Algorithm::Optimize,
+        policy: Policy::default(),
+        out: None,
+        png_every: 0,
+        max_frames: Some(90),
+        pace: true,
+        fovy: 1.0,
+        max_speed: 2.0,
+        max_turn: 2.0,
+    };
+    let mut killed = None;
+    let s = walk(&cfg, &mut |done, _| {
+        if done == 30 && killed.is_none() {
+            let (mut p, addr) = replicas.remove(0);
+            let _ = p.0.kill();
+            let _ = p.0.wait();
+            killed = Some(addr);
+        }
+    })
+    .unwrap();
+    assert!(killed.is_some());
+    assert_eq!(s.frames, 90);
+    assert_eq!(s.io_failures, 0, "nginx retried on the surviving replicas");
+    assert!(s.segments_read > 0 && s.drawn_triangles.max > 0.0);
+    eprintln!(
+        "nginx fan-out: {} frames, {} segments ({} bytes) read through nginx, fetch latency p50 {:.1} ms p99 {:.1} ms, replica {} killed at frame 30",
+        s.frames,
+        s.segments_read,
+        s.bytes_read,
+        s.fetch_latency_s.p50 * 1e3,
+        s.fetch_latency_s.p99 * 1e3,
+        killed.unwrap_or_default()
+    );
+}
