@@ -1,13 +1,16 @@
 //! The scaled-out deployment of `docker/`, without Docker: Debian's nginx with
 //! `docker/nginx.conf.template` in front of three `portico serve` processes on loopback ports.
 //! A client walks through nginx while one replica is killed mid-run; segments come from
-//! nginx's cache on the second read; the WebSocket stream passes the proxy.
+//! nginx's cache on the second read; the WebSocket stream passes the proxy; a short load test
+//! runs through the proxy on the replicas left.
 //!
 //! Needs `nginx` on the PATH or in /usr/sbin (`.ci/run` installs it). Without it the test
 //! prints why and passes, unless `CI` is set, where a missing nginx is a failure.
 
 use futures_util::{SinkExt, StreamExt};
 use portico_client::elision::Algorithm;
+use portico_client::loadtest::{Link, LoadtestConfig, run as run_loadtest};
+use portico_client::policy::policy_spec;
 use portico_client::walk::{WalkConfig, walk};
 use portico_data::path::{PathKind, generate};
 use portico_protocol::{PROTOCOL_VERSION, Policy, ServerFrame, StreamClient};
@@ -27,6 +30,19 @@ struct Proc(Child);
 impl Drop for Proc {
     fn drop(&mut self) {
         let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// nginx's master process, stopped with SIGTERM when dropped: the master then stops its
+/// workers. (SIGKILL would orphan the workers, which hold the test harness's output pipe open
+/// and keep `cargo test | tee` waiting for ever.)
+struct Nginx(Child);
+impl Drop for Nginx {
+    fn drop(&mut self) {
+        let _ = Command::new("kill")
+            .args(["-TERM", &self.0.id().to_string()])
+            .status();
         let _ = self.0.wait();
     }
 }
@@ -77,7 +93,7 @@ fn free_port() -> u16 {
         .port()
 }
 
-fn start_nginx(nginx: &Path, dir: &Path, replicas: &[String]) -> (Proc, String) {
+fn start_nginx(nginx: &Path, dir: &Path, replicas: &[String]) -> (Nginx, String) {
     let template = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/docker/nginx.conf.template"
@@ -106,9 +122,12 @@ fn start_nginx(nginx: &Path, dir: &Path, replicas: &[String]) -> (Proc, String) 
             "-g",
             "daemon off;",
         ])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
+    let child = Nginx(child);
     let base = format!("http://127.0.0.1:{port}");
     // Wait until nginx answers (a readiness poll: bounded, no fixed sleep).
     assert!(
@@ -116,7 +135,7 @@ fn start_nginx(nginx: &Path, dir: &Path, replicas: &[String]) -> (Proc, String) 
         "nginx never answered on {base}; see {}",
         tmp.join("error.log").display()
     );
-    (Proc(child), base)
+    (child, base)
 }
 
 /// Polls `/healthz` through a plain socket until it answers 200 (bounded: about 5 s).
@@ -259,5 +278,34 @@ fn three_replicas_behind_nginx_survive_losing_one() {
         s.fetch_latency_s.p50 * 1e3,
         s.fetch_latency_s.p99 * 1e3,
         killed.unwrap_or_default()
+    );
+
+    // A short load test through the proxy, on the two replicas left.
+    let out = dir.path().join("loadtest");
+    let policy = Policy::default();
+    let lt = LoadtestConfig {
+        server: base.clone(),
+        token: None,
+        clients: 4,
+        path: cfg.path.clone(),
+        policies: vec![(policy_spec(&policy), policy)],
+        baselines: false,
+        link: Link::parse("rtt=10ms,rate=100mbit").unwrap(),
+        cache_bytes: 16 << 20,
+        budget_s: 0.02,
+        max_frames: Some(40),
+        out: out.clone(),
+    };
+    let summary = run_loadtest(&lt, &mut |_, _| {}).unwrap();
+    let p = &summary.policies[0];
+    assert_eq!(summary.clients, 4);
+    assert!(p.bytes_fetched > 0, "{p:?}");
+    assert!(out.join("summary.json").exists());
+    eprintln!(
+        "nginx loadtest: 4 clients x 40 frames, {:.2} LODs skipped/frame, {:.1} MB fetched, request->resident p50 {:.1} ms p99 {:.1} ms",
+        p.lods_skipped_mean,
+        p.bytes_fetched as f64 / 1e6,
+        p.latency_p50_s * 1e3,
+        p.latency_p99_s * 1e3
     );
 }
