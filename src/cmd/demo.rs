@@ -9,6 +9,8 @@ use crate::cmd::walk::print_summary;
 use crate::progress::Bars;
 use anyhow::{Context, Result};
 use portico_client::elision::Algorithm;
+use portico_client::loadtest::{Link, LoadtestConfig, LoadtestSummary, run as run_loadtest};
+use portico_client::policy::policy_spec;
 use portico_client::render::Renderer;
 use portico_client::walk::{WalkConfig, WalkSummary, walk};
 use portico_data::Database;
@@ -52,6 +54,9 @@ pub struct Args {
     /// Simulated clients in the load test (0 = skip it).
     #[arg(long, default_value_t = 4)]
     clients: usize,
+    /// Frames each simulated client plays.
+    #[arg(long, default_value_t = 300)]
+    loadtest_frames: u64,
 }
 
 /// Timings of the demo's steps.
@@ -218,9 +223,83 @@ fn pictures(a: &Args, db: &Path, path: &CameraPath, out: &Path) -> Result<Pictur
     Ok(Pictures { sheet, birdseye })
 }
 
+/// A short load test of the default prefetch policy against demand fetch and the oracle, on
+/// the walked path; returns its summary as a Markdown section for the report.
 fn loadtest(a: &Args, clients: usize, url: &str, path: &CameraPath, out: &Path) -> Result<String> {
-    let _ = (a, clients, url, path, out);
-    Ok(String::new())
+    let policy = Policy::default();
+    let cfg = LoadtestConfig {
+        server: url.to_string(),
+        token: None,
+        clients,
+        path: path.clone(),
+        policies: vec![(policy_spec(&policy), policy)],
+        baselines: true,
+        link: Link::parse("rtt=20ms,rate=100mbit").map_err(anyhow::Error::msg)?,
+        cache_bytes: a.cache_mb << 20,
+        budget_s: a.budget_ms / 1e3,
+        max_frames: Some(a.loadtest_frames),
+        out: out.join("loadtest"),
+    };
+    let bars = Bars::new();
+    let mut started = false;
+    let mut shown = 0;
+    let s = run_loadtest(&cfg, &mut |done, total| {
+        if !started {
+            bars.start("loadtest", total);
+            started = true;
+        }
+        if done > shown {
+            bars.inc(done - shown);
+            shown = done;
+        }
+    })?;
+    bars.finish();
+    crate::cmd::loadtest::print_summary(&s, &cfg.out);
+    Ok(loadtest_section(&s))
+}
+
+/// The load test's headline table: one row per run, and prefetch against demand fetch.
+fn loadtest_section(s: &LoadtestSummary) -> String {
+    let mut r = String::new();
+    let _ = writeln!(
+        r,
+        "{} simulated clients x {} frames on the walked path, link {}, cache {} MB each \
+         (full report: `loadtest/report.md`).\n",
+        s.clients,
+        s.frames_per_client,
+        s.link_spec,
+        s.cache_bytes >> 20
+    );
+    let _ = writeln!(
+        r,
+        "| run | LODs skipped/frame (mean, max) | objects skipped/frame | cache hit rate | MB fetched | MB never drawn | request->resident p50 / p99 ms |\n|---|---|---|---|---|---|---|"
+    );
+    for p in &s.policies {
+        let _ = writeln!(
+            r,
+            "| `{}` | {:.2}, {:.0} | {:.2} | {:.3} | {:.1} | {:.1} | {:.0} / {:.0} |",
+            p.name,
+            p.lods_skipped_mean,
+            p.lods_skipped_max,
+            p.objects_skipped_mean,
+            p.cache_hit_rate,
+            p.bytes_fetched as f64 / 1e6,
+            p.bytes_wasted as f64 / 1e6,
+            p.latency_p50_s * 1e3,
+            p.latency_p99_s * 1e3
+        );
+    }
+    if let (Some(best), Some(demand)) = (s.best_prefetch(), s.get("demand")) {
+        let _ = writeln!(
+            r,
+            "\nPrefetch `{}` skips {:.2} LODs per frame against demand fetch's {:.2}.",
+            best.name, best.lods_skipped_mean, demand.lods_skipped_mean
+        );
+    }
+    for plot in &s.plots {
+        let _ = writeln!(r, "\n![{plot}](loadtest/{plot})");
+    }
+    r
 }
 
 /// The server, on a runtime of its own, on a free loopback port.
