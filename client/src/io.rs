@@ -1,31 +1,19 @@
 //! The lookahead/IO stage (Funkhouser Ch. 6 and §5.2.3), on its own thread with its own tokio
 //! runtime: it takes the latest observer the render stage published, asks the server for the
-//! read set, fetches those segments a few at a time, uploads geometry to the GPU (the upload
-//! stage) and hands the results to the render stage through a bounded queue. The render stage
-//! never waits for it.
+//! read set, keeps a few segment fetches going from the top of the latest one
+//! ([`crate::schedule::drive`]), checks every segment against the manifest's checksum, uploads
+//! geometry to the GPU (the upload stage) and hands the results to the render stage through a
+//! bounded queue. The render stage never waits for it.
 
 use crate::net::Remote;
 use crate::render::{GpuMesh, Uploader};
-use futures_util::StreamExt;
+use crate::schedule::{Ask, Event, Fetcher, drive};
+use anyhow::bail;
 use portico_data::cells::StabList;
-use portico_protocol::{NeedKind, Observer, PROTOCOL_VERSION, Policy, PrefetchRequest};
-use std::collections::{HashMap, HashSet};
+use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse, SegmentInfo};
+use std::collections::HashSet;
 use std::sync::Arc;
-use std::time::Instant;
 use tokio::sync::{mpsc, watch};
-
-/// What the render stage publishes after each frame.
-#[derive(Debug, Clone)]
-pub struct FrameState {
-    /// Frame index.
-    pub frame: u64,
-    /// The observer.
-    pub observer: Observer,
-    /// Segments resident in the cache.
-    pub held: Vec<u32>,
-    /// How many arrivals the render stage has taken from the queue so far.
-    pub consumed: u64,
-}
 
 /// A segment's contents, ready for the cache.
 pub enum Payload {
@@ -36,23 +24,7 @@ pub enum Payload {
 }
 
 /// One message from the IO stage.
-pub enum Arrival {
-    /// A segment arrived.
-    Segment {
-        /// Segment id.
-        id: u32,
-        /// Its contents.
-        payload: Payload,
-        /// Bytes on the wire.
-        bytes: u64,
-        /// Seconds from the prefetch request that listed it to its arrival.
-        latency_s: f64,
-    },
-    /// Segments the server says are outside the lookahead set: release them first.
-    Hints(Vec<u32>),
-    /// Something failed (logged and counted; the walk goes on).
-    Failed(String),
-}
+pub type Arrival = Event<Payload>;
 
 /// Settings of the IO stage.
 #[derive(Debug, Clone, Copy)]
@@ -63,10 +35,88 @@ pub struct IoConfig {
     pub parallel: usize,
 }
 
+/// What the IO stage knows of the model: each segment's size and checksum (the manifest's
+/// table), and which segments are stab lists.
+#[derive(Debug, Clone)]
+pub struct Catalogue {
+    /// The manifest's segment table, by id.
+    pub segments: Vec<SegmentInfo>,
+    /// Ids of the stab-list segments.
+    pub stabs: HashSet<u32>,
+}
+
+/// The real client's [`Fetcher`]: HTTP, checksum, decode, GPU upload.
+#[derive(Clone)]
+struct Http {
+    remote: Remote,
+    uploader: Uploader,
+    catalogue: Arc<Catalogue>,
+}
+
+impl Fetcher for Http {
+    type Body = Payload;
+
+    fn prefetch(
+        &self,
+        req: PrefetchRequest,
+    ) -> impl Future<Output = anyhow::Result<PrefetchResponse>> + Send + 'static {
+        let remote = self.remote.clone();
+        async move { remote.prefetch(&req).await }
+    }
+
+    fn segment(
+        &self,
+        id: u32,
+    ) -> impl Future<Output = anyhow::Result<(Payload, u64)>> + Send + 'static {
+        let me = self.clone();
+        async move {
+            let bytes = me.remote.segment(id).await?;
+            let payload = me.decode(id, &bytes)?;
+            Ok((payload, bytes.len() as u64))
+        }
+    }
+}
+
+impl Http {
+    /// Rejects a segment whose bytes do not match the manifest (it is counted and asked for
+    /// again later), and turns the rest into cache entries.
+    fn decode(&self, id: u32, bytes: &[u8]) -> anyhow::Result<Payload> {
+        verify(self.catalogue.segments.get(id as usize), id, bytes)?;
+        if self.catalogue.stabs.contains(&id) {
+            let list = portico_data::format::decode_segment::<StabList>(bytes)
+                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
+            return Ok(Payload::Stab(Arc::new(list)));
+        }
+        let mesh = self
+            .uploader
+            .upload(bytes)
+            .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
+        Ok(Payload::Mesh(mesh))
+    }
+}
+
+/// Checks a segment's bytes against its row of the manifest (size and xxh3, the strong ETag):
+/// a segment damaged on the way is rejected, never uploaded or decoded.
+pub fn verify(info: Option<&SegmentInfo>, id: u32, bytes: &[u8]) -> anyhow::Result<()> {
+    let Some(info) = info else {
+        bail!("segment {id}: not in the manifest");
+    };
+    let sum = xxhash_rust::xxh3::xxh3_64(bytes);
+    if bytes.len() as u64 != info.bytes || sum != info.checksum {
+        bail!(
+            "segment {id}: corrupt ({} bytes, xxh3 {sum:016x}; the manifest says {} bytes, {:016x})",
+            bytes.len(),
+            info.bytes,
+            info.checksum
+        );
+    }
+    Ok(())
+}
+
 /// A running IO stage.
 pub struct IoStage {
     /// Publish the latest frame state here.
-    pub state: watch::Sender<Option<FrameState>>,
+    pub state: watch::Sender<Option<Ask>>,
     /// Arrivals come out here.
     pub arrivals: mpsc::Receiver<Arrival>,
     thread: Option<std::thread::JoinHandle<()>>,
@@ -74,9 +124,19 @@ pub struct IoStage {
 
 impl IoStage {
     /// Starts the stage on its own thread.
-    pub fn start(remote: Remote, uploader: Uploader, cfg: IoConfig) -> std::io::Result<IoStage> {
+    pub fn start(
+        remote: Remote,
+        uploader: Uploader,
+        catalogue: Catalogue,
+        cfg: IoConfig,
+    ) -> std::io::Result<IoStage> {
         let (state_tx, state_rx) = watch::channel(None);
         let (tx, rx) = mpsc::channel(1024);
+        let fetcher = Http {
+            remote,
+            uploader,
+            catalogue: Arc::new(catalogue),
+        };
         let thread = std::thread::Builder::new()
             .name("portico-io".into())
             .spawn(move || {
@@ -86,11 +146,11 @@ impl IoStage {
                 {
                     Ok(rt) => rt,
                     Err(e) => {
-                        let _ = tx.blocking_send(Arrival::Failed(format!("IO runtime: {e}")));
+                        let _ = tx.blocking_send(Event::Failed(format!("IO runtime: {e}")));
                         return;
                     }
                 };
-                rt.block_on(run(remote, uploader, cfg, state_rx, tx));
+                rt.block_on(drive(fetcher, cfg.policy, cfg.parallel, state_rx, tx));
             })?;
         Ok(IoStage {
             state: state_tx,
@@ -109,97 +169,29 @@ impl IoStage {
     }
 }
 
-async fn run(
-    remote: Remote,
-    uploader: Uploader,
-    cfg: IoConfig,
-    mut state: watch::Receiver<Option<FrameState>>,
-    tx: mpsc::Sender<Arrival>,
-) {
-    // Delivered but maybe not yet seen in a published held set: id → arrival sequence number.
-    let mut delivered: HashMap<u32, u64> = HashMap::new();
-    let mut seq = 0u64;
-    while state.changed().await.is_ok() {
-        let Some(st) = state.borrow_and_update().clone() else {
-            continue;
-        };
-        delivered.retain(|_, s| *s >= st.consumed);
-        let held: HashSet<u32> = st
-            .held
-            .iter()
-            .copied()
-            .chain(delivered.keys().copied())
-            .collect();
-        let req = PrefetchRequest {
-            version: PROTOCOL_VERSION,
-            observer: st.observer,
-            policy: cfg.policy,
-            held: portico_protocol::encode_held(held),
-        };
-        let t0 = Instant::now();
-        let resp = match remote.prefetch(&req).await {
-            Ok(r) => r,
-            Err(e) => {
-                if send(&tx, &mut seq, Arrival::Failed(format!("{e:#}")))
-                    .await
-                    .is_err()
-                {
-                    return;
-                }
-                continue;
-            }
-        };
-        if !resp.evict.is_empty()
-            && send(&tx, &mut seq, Arrival::Hints(resp.evict))
-                .await
-                .is_err()
-        {
-            return;
-        }
-        let mut fetches = futures_util::stream::iter(resp.items)
-            .map(|item| {
-                let remote = &remote;
-                async move { (item, remote.segment(item.segment).await) }
-            })
-            .buffered(cfg.parallel.max(1));
-        while let Some((item, got)) = fetches.next().await {
-            let arrival = match got {
-                Err(e) => Arrival::Failed(format!("{e:#}")),
-                Ok(bytes) => decode(item.kind, item.segment, &bytes, &uploader, t0),
-            };
-            if matches!(arrival, Arrival::Segment { .. }) {
-                delivered.insert(item.segment, seq);
-            }
-            if send(&tx, &mut seq, arrival).await.is_err() {
-                return;
-            }
-        }
-    }
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
 
-/// Sends one arrival; every message counts in the sequence the render stage acknowledges with
-/// [`FrameState::consumed`].
-async fn send(tx: &mpsc::Sender<Arrival>, seq: &mut u64, a: Arrival) -> Result<(), ()> {
-    *seq += 1;
-    tx.send(a).await.map_err(|_| ())
-}
-
-fn decode(kind: NeedKind, id: u32, bytes: &[u8], uploader: &Uploader, t0: Instant) -> Arrival {
-    let payload = match kind {
-        NeedKind::Geometry => uploader
-            .upload(bytes)
-            .map(Payload::Mesh)
-            .map_err(|e| e.to_string()),
-        NeedKind::Stab => portico_data::format::decode_segment::<StabList>(bytes)
-            .map(|s| Payload::Stab(Arc::new(s))),
-    };
-    match payload {
-        Ok(payload) => Arrival::Segment {
-            id,
-            payload,
+    #[test]
+    fn damaged_or_unknown_segments_are_rejected() {
+        let bytes = b"segment bytes".to_vec();
+        let info = SegmentInfo {
+            kind: 1,
             bytes: bytes.len() as u64,
-            latency_s: t0.elapsed().as_secs_f64(),
-        },
-        Err(e) => Arrival::Failed(format!("segment {id}: {e}")),
+            checksum: xxhash_rust::xxh3::xxh3_64(&bytes),
+        };
+        assert!(verify(Some(&info), 3, &bytes).is_ok());
+        let mut flipped = bytes.clone();
+        flipped[4] ^= 1;
+        let e = verify(Some(&info), 3, &flipped).unwrap_err().to_string();
+        assert!(e.contains("segment 3: corrupt"), "{e}");
+        assert!(verify(Some(&info), 3, &bytes[..5]).is_err(), "truncated");
+        assert!(
+            verify(None, 9, &bytes)
+                .unwrap_err()
+                .to_string()
+                .contains("not in the manifest")
+        );
     }
 }

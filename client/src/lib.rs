@@ -9,6 +9,7 @@ pub mod loadtest;
 pub mod net;
 pub mod policy;
 pub mod render;
+pub mod schedule;
 pub mod sheet;
 pub mod stats;
 pub mod view;

@@ -1,11 +1,13 @@
 //! The visibility stage of one frame (Funkhouser §4.1.2) and the candidates it hands to detail
 //! elision: eye-to-cell and eye-to-object culling through the portals of the server's cell
-//! graph with the eye cell's stab list (or plain frustum culling while that stab list is not yet
-//! resident), then each visible object's screen size and focus.
+//! graph with the eye cell's stab list (or, while that stab list is not yet resident, every
+//! object in the reached cells' wedges), then each visible object's screen size and focus.
 
 use crate::elision::{Candidate, LodOption};
 use glam::{Mat4, Vec3, Vec4};
-use portico_data::cells::realtime::{Frustum, eye_to_cell, eye_to_object, frustum_to_object};
+use portico_data::cells::realtime::{
+    Frustum, eye_to_cell, eye_to_object, eye_to_object_unlisted, frustum_to_object,
+};
 use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::Header;
 use portico_data::geometry::Aabb;
@@ -17,7 +19,8 @@ pub struct Visible {
     pub cells: u32,
     /// Visible instances, sorted.
     pub objects: Vec<u32>,
-    /// The eye cell's stab list was not resident: frustum culling was used.
+    /// The eye cell's stab list was not resident: the looser culling without it was used
+    /// (reached cells' wedges, or the plain frustum outside every live cell).
     pub fallback: bool,
     /// The eye's cell, if inside a live cell.
     pub eye_cell: Option<u32>,
@@ -49,8 +52,16 @@ pub fn visible(
             fallback: false,
             eye_cell,
         },
-        None => Visible {
+        // The stab list is on its way: the cells reached through the portals bound what can be
+        // seen (outside every live cell nothing does, and only the frustum is left).
+        None if eye_cell.is_some() => Visible {
             cells: reached.len() as u32,
+            objects: eye_to_object_unlisted(graph, &reached, bounds),
+            fallback: true,
+            eye_cell,
+        },
+        None => Visible {
+            cells: 0,
             objects: frustum_to_object(bounds, view),
             fallback: true,
             eye_cell,
@@ -128,6 +139,28 @@ pub fn candidates(
         .collect()
 }
 
+/// Funkhouser ran his prefetch experiments (§5.3) with the optimizing elider "combined with a
+/// static detail elision size threshold": no object is drawn finer than the LOD whose average
+/// polygon covers `threshold` pixels — the same cap the server's lookahead puts on each object
+/// (`portico_data::prefetch::lookahead::max_lod`), so a client never wants a LOD no prefetch
+/// would ever send. Drops each candidate's finer LODs (keeping at least the coarsest) and
+/// returns, per candidate, how many were dropped (add it to a choice's LOD index).
+pub fn cap_detail(cands: &mut [Candidate], threshold: f32) -> Vec<usize> {
+    cands
+        .iter_mut()
+        .map(|c| {
+            let last = c.lods.len().saturating_sub(1);
+            let keep = c
+                .lods
+                .iter()
+                .position(|l| c.pixels / l.triangles.max(1) as f32 >= threshold)
+                .unwrap_or(last);
+            c.lods.drain(..keep);
+            keep
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -158,5 +191,25 @@ mod tests {
             max: [51.0, 0.5, -2.5],
         };
         assert_eq!(screen_pixels(&side, &vp, 640, 480), 0.0);
+    }
+
+    #[test]
+    fn detail_is_capped_at_the_size_threshold() {
+        let lod = |triangles| LodOption {
+            triangles,
+            vertices: triangles,
+            error: 0.0,
+            resident: true,
+        };
+        let lods = vec![lod(1000), lod(100), lod(10)];
+        let mut cands = vec![
+            Candidate::new(0, lods.clone(), 16_000.0), // 16 px per triangle at the finest
+            Candidate::new(1, lods.clone(), 1_600.0),  // only the middle one reaches 16
+            Candidate::new(2, lods, 16.0),             // none does: keep the coarsest
+        ];
+        assert_eq!(cap_detail(&mut cands, 16.0), vec![0, 1, 2]);
+        let left: Vec<usize> = cands.iter().map(|c| c.lods.len()).collect();
+        assert_eq!(left, vec![3, 2, 1]);
+        assert_eq!(cands[1].lods[0].triangles, 100);
     }
 }

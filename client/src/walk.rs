@@ -8,9 +8,10 @@
 use crate::cache::ObjectCache;
 use crate::cost::{CostModel, OnlineCost};
 use crate::elision::{Algorithm, Elider};
-use crate::io::{Arrival, FrameState, IoConfig, IoStage, Payload};
+use crate::io::{Catalogue, IoConfig, IoStage, Payload};
 use crate::net::Remote;
 use crate::render::{Camera, Draw, GpuMesh, Renderer};
+use crate::schedule::{Ask, Event};
 use crate::stats::{FrameRow, Series, write_csv};
 use crate::view;
 use anyhow::{Context, Result};
@@ -138,6 +139,7 @@ struct Model {
     bounds: Vec<portico_data::geometry::Aabb>,
     database_id: String,
     model_triangles: u64,
+    catalogue: Catalogue,
 }
 
 /// Runs a walk; `on_frame(done, total)` reports progress.
@@ -160,6 +162,7 @@ pub fn walk(cfg: &WalkConfig, on_frame: &mut dyn FnMut(u64, u64)) -> Result<Walk
     let io = IoStage::start(
         remote,
         renderer.uploader(),
+        model.catalogue.clone(),
         IoConfig {
             policy,
             parallel: 8,
@@ -193,7 +196,17 @@ fn load_model(remote: &Remote) -> Result<Model> {
                     .map_or(0, |l| l.triangles as u64)
             })
             .sum();
+        let stabs = m
+            .header
+            .cells
+            .as_ref()
+            .map(|c| c.stab_segments.iter().copied().collect())
+            .unwrap_or_default();
         Ok(Model {
+            catalogue: Catalogue {
+                segments: m.segments,
+                stabs,
+            },
             header: m.header,
             graph,
             bounds,
@@ -292,7 +305,7 @@ impl<'a> Walker<'a> {
             row.frame_s = t0.elapsed().as_secs_f64();
             self.last_frame_s = Some(row.frame_s);
             self.online.observe(row.predicted_s, row.render_s);
-            self.publish(&io, frame, obs);
+            self.publish(&io, obs);
             rows.push(row);
             on_frame(frame + 1, total);
             if self.cfg.png_every > 0 && frame % self.cfg.png_every == 0 {
@@ -311,18 +324,18 @@ impl<'a> Walker<'a> {
         while let Ok(a) = io.arrivals.try_recv() {
             self.consumed += 1;
             match a {
-                Arrival::Segment {
+                Event::Segment {
                     id,
-                    payload,
+                    body,
                     bytes,
-                    latency_s,
+                    listed_at,
                 } => {
                     row.read_segments += 1;
                     row.read_bytes += bytes;
                     self.segments_read += 1;
                     self.bytes_read += bytes;
-                    self.latencies.push(latency_s);
-                    let value = match payload {
+                    self.latencies.push(listed_at.elapsed().as_secs_f64());
+                    let value = match body {
                         Payload::Mesh(m) => Resident::Mesh(m),
                         Payload::Stab(s) => Resident::Stab(s),
                     };
@@ -330,8 +343,8 @@ impl<'a> Walker<'a> {
                         row.released_segments += released.len() as u32;
                     }
                 }
-                Arrival::Hints(ids) => ids.iter().for_each(|&id| self.cache.demote(id)),
-                Arrival::Failed(e) => {
+                Event::Answer(resp) => resp.evict.iter().for_each(|&id| self.cache.demote(id)),
+                Event::Failed(e) => {
                     self.failures += 1;
                     tracing::warn!("io: {e}");
                 }
@@ -392,7 +405,9 @@ impl<'a> Walker<'a> {
             size: self.cfg.size,
             half_fov: obs.half_fov_x,
         };
-        let cands = view::candidates(&self.model.header, &vis.objects, &viewpoint, &resident);
+        let mut cands = view::candidates(&self.model.header, &vis.objects, &viewpoint, &resident);
+        // Never want finer than the server's lookahead will ever send (§5.3's static cap).
+        let dropped = view::cap_detail(&mut cands, self.cfg.policy.size_threshold_px);
         let model = self.online.apply(&self.cost);
         let decided = self.elider.choose(&cands, &model, self.last_frame_s);
         row.elision_s = t.elapsed().as_secs_f64();
@@ -403,12 +418,12 @@ impl<'a> Walker<'a> {
         let header = &self.model.header;
         let mut draws = Vec::with_capacity(cands.len());
         let mut touched = Vec::new();
-        for (c, choice) in cands.iter().zip(&decided.choices) {
+        for ((c, choice), skip) in cands.iter().zip(&decided.choices).zip(&dropped) {
             let inst = &header.instances[c.id as usize];
             let lods = header.lods_of(inst);
             touched.extend(lods.iter().map(|l| l.segment).filter(|&s| resident(s)));
             let Some(l) = choice.lod else { continue };
-            if let Some(Resident::Mesh(mesh)) = cache.get(lods[l].segment) {
+            if let Some(Resident::Mesh(mesh)) = cache.get(lods[l + skip].segment) {
                 let color = header
                     .materials
                     .get(inst.material as usize)
@@ -448,13 +463,13 @@ impl<'a> Walker<'a> {
         }
     }
 
-    fn publish(&self, io: &IoStage, frame: u64, observer: Observer) {
-        let held = self.cache.ids().collect();
-        let _ = io.state.send(Some(FrameState {
-            frame,
+    fn publish(&self, io: &IoStage, observer: Observer) {
+        let _ = io.state.send(Some(Ask {
             observer,
-            held,
+            held: self.cache.ids().collect(),
             consumed: self.consumed,
+            wants: None,
+            at: tokio::time::Instant::now(),
         }));
     }
 

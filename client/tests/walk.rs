@@ -113,3 +113,217 @@ fn a_tiny_cache_never_overflows_and_keeps_drawing() {
     assert!(s.evictions > 0, "a 48 KiB cache must release segments");
     assert!(s.drawn_triangles.max > 0.0);
 }
+
+/// A path that stands still for ten seconds where a spin would start, looking as it would.
+fn standing(db: &portico_data::Database) -> portico_data::path::CameraPath {
+    let graph = db.cell_graph().unwrap().unwrap();
+    let spin = generate(&graph, PathKind::Spin, 1, 1, 1.5, 1.5).unwrap();
+    let k = spin.keyframes[0];
+    portico_data::path::CameraPath {
+        kind: "standing".into(),
+        keyframes: vec![k, portico_data::path::Keyframe { t: 10.0, ..k }],
+    }
+}
+
+/// Every instance at its finest LOD, from the database itself: the full-detail picture.
+fn full_detail(
+    db: &portico_data::Database,
+    path: &portico_data::path::CameraPath,
+    size: (u32, u32),
+    fovy: f32,
+) -> image::RgbaImage {
+    use portico_client::render::{Camera, Draw, Renderer};
+    let mut r = Renderer::new(size.0, size.1).unwrap();
+    let h = db.header();
+    let meshes: Vec<_> = h
+        .instances
+        .iter()
+        .map(|i| {
+            let seg = h.lods_of(i)[0].segment;
+            r.upload(&db.segment(seg).unwrap()).unwrap()
+        })
+        .collect();
+    let draws: Vec<Draw> = h
+        .instances
+        .iter()
+        .zip(&meshes)
+        .map(|(i, mesh)| Draw {
+            mesh,
+            transform: glam::Mat4::from_cols_array(&i.transform),
+            color: h
+                .materials
+                .get(i.material as usize)
+                .map_or([1.0; 4], |m| m.base_color),
+        })
+        .collect();
+    let (eye, dir) = path.sample(0.0);
+    let camera = Camera {
+        eye,
+        target: eye + dir,
+        up: glam::Vec3::Y,
+        fovy,
+        near: 0.05,
+        far: h.bounds.size().length().max(10.0) * 1.5,
+    };
+    r.render(&camera, &draws).unwrap();
+    r.read_pixels().unwrap()
+}
+
+#[test]
+fn once_everything_has_arrived_a_frame_matches_the_full_detail_render() {
+    let dir = tempfile::tempdir().unwrap();
+    let (server, _) = serve_tiny(dir.path());
+    let out = dir.path().join("walk");
+    let db = portico_data::Database::open(&dir.path().join("tiny.portico")).unwrap();
+    let mut cfg = config(server, out.clone(), 64 << 20);
+    cfg.path = standing(&db);
+    cfg.elision = Algorithm::None; // the finest LOD of everything visible
+    cfg.policy.size_threshold_px = 0.0; // and no cap on what the server sends
+    cfg.max_frames = Some(50);
+    cfg.png_every = 49;
+    let s = walk(&cfg, &mut |_, _| {}).unwrap();
+    assert_eq!(s.io_failures, 0);
+    let walked = image::open(out.join("frames/frame_00049.png"))
+        .unwrap()
+        .to_rgba8();
+    let reference = full_detail(&db, &cfg.path, cfg.size, cfg.fovy);
+    let sky = *reference.get_pixel(0, 0);
+    let drawn = reference.pixels().filter(|p| **p != sky).count();
+    assert!(
+        drawn * 10 > reference.len() / 4,
+        "the reference view shows the building ({drawn} px)"
+    );
+    let differ = walked
+        .pixels()
+        .zip(reference.pixels())
+        .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 8))
+        .count();
+    assert!(
+        differ * 100 <= reference.len() / 4,
+        "{differ} of {} pixels differ from the full-detail render",
+        reference.len() / 4
+    );
+}
+
+/// A TCP proxy that holds every chunk from the server for `delay` before passing it on: a slow
+/// server (or a long, thin link). Returns its base URL.
+fn slow_proxy(upstream: &str, delay: std::time::Duration) -> String {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let upstream = upstream.trim_start_matches("http://").to_string();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let rt = tokio::runtime::Runtime::new().unwrap();
+        rt.block_on(async move {
+            let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+            tx.send(format!("http://{}", l.local_addr().unwrap()))
+                .unwrap();
+            loop {
+                let Ok((client, _)) = l.accept().await else {
+                    return;
+                };
+                let up = upstream.clone();
+                tokio::spawn(async move {
+                    let Ok(server) = tokio::net::TcpStream::connect(&up).await else {
+                        return;
+                    };
+                    let (mut cr, mut cw) = client.into_split();
+                    let (mut sr, mut sw) = server.into_split();
+                    tokio::spawn(async move {
+                        let _ = tokio::io::copy(&mut cr, &mut sw).await;
+                    });
+                    let mut buf = vec![0u8; 64 << 10];
+                    while let Ok(n) = sr.read(&mut buf).await {
+                        if n == 0 {
+                            break;
+                        }
+                        tokio::time::sleep(delay).await;
+                        if cw.write_all(&buf[..n]).await.is_err() {
+                            break;
+                        }
+                    }
+                });
+            }
+        });
+    });
+    rx.recv().unwrap()
+}
+
+#[test]
+fn a_slow_server_makes_the_client_skip_lods_never_wait() {
+    let dir = tempfile::tempdir().unwrap();
+    let (server, _) = serve_tiny(dir.path());
+    let delay = std::time::Duration::from_millis(250);
+    let slow = slow_proxy(&server, delay);
+    let out = dir.path().join("walk");
+    let mut cfg = config(slow, out, 64 << 20);
+    cfg.max_frames = Some(100);
+    let s = walk(&cfg, &mut |_, _| {}).unwrap();
+    assert_eq!(s.frames, 100);
+    assert!(s.segments_read > 0, "{s:?}");
+    // What had not arrived was skipped ...
+    assert!(s.objects_skipped.max > 0.0, "{:?}", s.objects_skipped);
+    assert!(
+        s.fetch_latency_s.min >= delay.as_secs_f64() * 0.9,
+        "{:?}",
+        s.fetch_latency_s
+    );
+    // ... and no frame waited for it.
+    assert!(
+        s.frame_s.max < delay.as_secs_f64(),
+        "a frame took {} s",
+        s.frame_s.max
+    );
+    assert!(s.drawn_triangles.max > 0.0, "what arrived was drawn");
+}
+
+#[test]
+fn a_server_restart_mid_walk_is_survived() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, state) = serve_tiny(dir.path());
+    // A second server on a port of our own, which we stop and start again.
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let addr = l.local_addr().unwrap();
+    drop(l);
+    let start = |state: std::sync::Arc<AppState>| {
+        let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+        let (up_tx, up_rx) = std::sync::mpsc::channel();
+        let t = std::thread::spawn(move || {
+            let rt = tokio::runtime::Runtime::new().unwrap();
+            rt.block_on(async move {
+                let l = tokio::net::TcpListener::bind(addr).await.unwrap();
+                up_tx.send(()).unwrap();
+                portico_server::serve(state, l, async move {
+                    let _ = stop_rx.await;
+                })
+                .await
+                .unwrap();
+            });
+        });
+        up_rx.recv().unwrap();
+        (stop_tx, t)
+    };
+    let mut running = Some(start(state.clone()));
+    let out = dir.path().join("walk");
+    let mut cfg = config(format!("http://{addr}"), out, 64 << 20);
+    cfg.max_frames = Some(90);
+    let mut read_after = 0u64;
+    let s = walk(&cfg, &mut |done, _| {
+        if done == 20
+            && let Some((stop, t)) = running.take()
+        {
+            let _ = stop.send(());
+            t.join().unwrap();
+        }
+        if done == 40 {
+            running = Some(start(state.clone()));
+            read_after = state.metrics.requests("prefetch");
+        }
+    })
+    .unwrap();
+    assert_eq!(s.frames, 90, "the walk went on through the outage");
+    assert!(s.io_failures > 0, "the outage was noticed");
+    assert!(
+        state.metrics.requests("prefetch") > read_after,
+        "the client came back to the restarted server"
+    );
+}

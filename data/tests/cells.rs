@@ -6,7 +6,7 @@ use glam::Vec3;
 use portico_data::Database;
 use portico_data::build::{BuildOptions, Quiet, build};
 use portico_data::cells::occluders::Occluders;
-use portico_data::cells::realtime::{Frustum, eye_to_cell, eye_to_object};
+use portico_data::cells::realtime::{Frustum, eye_to_cell, eye_to_object, eye_to_object_unlisted};
 use portico_data::cells::verify::{cast, verify};
 use portico_data::cells::{CellGraph, StabList, precompute};
 use portico_data::geometry::Aabb;
@@ -231,7 +231,8 @@ proptest! {
     #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
 
     /// From any eye in a live cell looking anywhere: eye-to-cell ⊆ cell-to-cell, eye-to-object
-    /// ⊆ cell-to-object, and every object a ray inside the frustum reaches is kept.
+    /// ⊆ cell-to-object, eye-to-object ⊆ its stab-list-free fallback, and every object a ray
+    /// inside the frustum reaches is kept.
     #[test]
     fn eye_to_object_is_conservative_and_within_cell_to_object(
         cell_pick in 0usize..10_000, fx in 0.05f32..0.95, fy in 0.05f32..0.95, fz in 0.05f32..0.95,
@@ -258,6 +259,9 @@ proptest! {
         let eto = eye_to_object(&reached, stab, objects);
         let cto = stab.objects();
         prop_assert!(eto.iter().all(|o| cto.binary_search(o).is_ok()));
+        // Without the stab list (not yet arrived), the reached cells alone keep a superset.
+        let unlisted = eye_to_object_unlisted(g, &reached, objects);
+        prop_assert!(eto.iter().all(|o| unlisted.binary_search(o).is_ok()), "unlisted culls a visible object");
         let f = dir.normalize();
         let right = f.cross(Vec3::Y).normalize();
         let up = right.cross(f);

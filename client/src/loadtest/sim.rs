@@ -4,30 +4,30 @@
 //! elider choose among RESIDENT LODs with the default cost model, and counts what it had to give
 //! up (LODs skipped, objects skipped: Funkhouser §5.2.4). It never waits for the network.
 //!
-//! Its IO task fetches through the client's emulated [`Pipe`], in one of three ways:
-//! - [`Mode::Prefetch`]: the real client's prefetch loop (`client/src/io.rs`): post the observer
-//!   and the held set to `/v1/prefetch`, demote the eviction hints, fetch the answer's items in
-//!   need order a few at a time, repeat with the latest observer (Funkhouser §5.2–5.3);
+//! Its IO task is the real client's ([`crate::schedule::drive`]) fetching through the client's
+//! emulated [`Pipe`], with its need list made in one of three ways:
+//! - [`Mode::Prefetch`]: the server's lookahead, as the real client: post the observer and the
+//!   held set to `/v1/prefetch` once per frame, demote the eviction hints, read the latest
+//!   answer's items in need order a few at a time (Funkhouser §5.2–5.3);
 //! - [`Mode::Demand`]: no lookahead; each frame the client asks for exactly the LODs its elider
 //!   wanted and did not have (and the eye cell's stab list), computed from its visible set;
 //! - [`Mode::Oracle`]: knows the future path; each frame it asks for what an omniscient client
 //!   would draw in the next frames, nearest in time first.
 
 use super::link::Pipe;
-use super::world::{World, cap_detail};
+use super::world::World;
 use crate::cache::ObjectCache;
 use crate::cost::CostModel;
 use crate::elision::{Algorithm, Candidate, Choice, Elider};
 use crate::net::Remote;
+use crate::schedule::{Ask, Event, Fetcher, drive};
 use crate::view;
-use futures_util::StreamExt;
-use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
+use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse};
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 use tokio::sync::{mpsc, watch};
-use tokio::task::JoinSet;
 use tokio::time::{Instant, MissedTickBehavior};
 
 /// How a simulated client gets its data.
@@ -111,28 +111,8 @@ pub struct ClientResult {
     pub failures: u64,
 }
 
-/// What the frame loop tells its IO task after each frame.
-#[derive(Debug, Clone)]
-struct Published {
-    observer: Observer,
-    held: Vec<u32>,
-    wants: Vec<u32>,
-    consumed: u64,
-    at: Instant,
-}
-
-/// What the IO task hands the frame loop.
-#[derive(Debug)]
-enum Msg {
-    Segment {
-        id: u32,
-        bytes: u64,
-        listed_at: Instant,
-    },
-    Hints(Vec<u32>),
-    Answer(AnswerStat),
-    Failed(String),
-}
+/// What the IO task hands the frame loop: segment bodies are just their sizes.
+type Msg = Event<()>;
 
 /// What a client task needs.
 #[derive(Debug, Clone)]
@@ -159,15 +139,16 @@ pub struct Setup {
 pub async fn client(s: Setup) -> ClientResult {
     let (state_tx, state_rx) = watch::channel(None);
     let (tx, rx) = mpsc::channel(4096);
-    let io = Io {
+    let link = Linked {
         remote: s.remote.clone(),
         pipe: s.pipe.clone(),
-        tx,
     };
-    let task = match s.mode {
-        Mode::Prefetch(p) => tokio::spawn(prefetch_io(io, p, state_rx)),
-        Mode::Demand | Mode::Oracle { .. } => tokio::spawn(list_io(io, state_rx)),
+    // Demand fetch and the oracle make their own lists; the policy only matters to prefetch.
+    let policy = match s.mode {
+        Mode::Prefetch(p) => p,
+        Mode::Demand | Mode::Oracle { .. } => Policy::default(),
     };
+    let task = tokio::spawn(drive(link, policy, PARALLEL, state_rx, tx));
     let mut c = Client::new(&s, rx);
     let mut tick = tokio::time::interval(Duration::from_secs_f64(s.world.dt.max(1e-3)));
     tick.set_missed_tick_behavior(MissedTickBehavior::Delay);
@@ -224,17 +205,25 @@ impl Client {
         while let Ok(m) = self.rx.try_recv() {
             self.consumed += 1;
             match m {
-                Msg::Segment {
+                Event::Segment {
                     id,
                     bytes,
                     listed_at,
+                    ..
                 } => self.arrive(id, bytes, listed_at),
-                Msg::Hints(ids) => ids.iter().for_each(|&id| self.cache.demote(id)),
-                Msg::Answer(a) => {
+                Event::Answer(resp) => {
+                    resp.evict.iter().for_each(|&id| self.cache.demote(id));
+                    let a = AnswerStat {
+                        range_cells: resp.range_cells,
+                        lookahead_objects: resp.lookahead_objects,
+                        lookahead_bytes: resp.lookahead_bytes,
+                        micros: resp.micros,
+                        items: resp.items.len() as u32,
+                    };
                     self.last_answer = Some(a);
                     self.result.answers.push(a);
                 }
-                Msg::Failed(e) => {
+                Event::Failed(e) => {
                     self.result.failures += 1;
                     tracing::warn!("loadtest io: {e}");
                 }
@@ -278,7 +267,7 @@ impl Client {
         let resident = |s: u32| cache.contains(s);
         let mut cands =
             view::candidates(&w.header, &vis.objects, &w.frames[p].viewpoint, &resident);
-        let dropped = cap_detail(&mut cands, w.size_threshold_px);
+        let dropped = view::cap_detail(&mut cands, w.size_threshold_px);
         let decided = self.elider.choose(&cands, &self.cost, None);
         let mut row = FrameStat {
             path_frame: p,
@@ -327,23 +316,20 @@ impl Client {
     }
 
     /// What the IO task gets after frame `f` (path frame `p`).
-    fn publish(&mut self, p: usize, f: u64, d: &Decided) -> Published {
+    fn publish(&mut self, p: usize, f: u64, d: &Decided) -> Ask {
         let wants = match self.mode {
-            Mode::Prefetch(_) => Vec::new(),
-            Mode::Demand => self.demand_wants(d),
+            Mode::Prefetch(_) => None,
+            Mode::Demand => Some(self.demand_wants(d)),
             Mode::Oracle { lookahead } => {
                 let left = self.frames.saturating_sub(f);
-                self.oracle_wants(p, lookahead.min(left), d)
+                Some(self.oracle_wants(p, lookahead.min(left), d))
             }
         };
-        Published {
+        Ask {
             observer: self.world.frames[p].observer,
-            held: match self.mode {
-                Mode::Prefetch(_) => self.cache.ids().collect(),
-                _ => Vec::new(),
-            },
-            wants,
+            held: self.cache.ids().collect(),
             consumed: self.consumed,
+            wants,
             at: Instant::now(),
         }
     }
@@ -456,185 +442,38 @@ fn count(row: &mut FrameStat, c: &Candidate, ch: &Choice) {
     };
 }
 
-/// The IO task's ends of the channels.
-struct Io {
+/// A simulated client's [`Fetcher`]: the real HTTP requests, through its emulated link.
+#[derive(Clone)]
+struct Linked {
     remote: Remote,
     pipe: Arc<Pipe>,
-    tx: mpsc::Sender<Msg>,
 }
 
-impl Io {
-    /// Sends one message; every message counts in the sequence the frame loop acknowledges.
-    async fn send(&self, seq: &mut u64, m: Msg) -> Result<(), ()> {
-        *seq += 1;
-        self.tx.send(m).await.map_err(|_| ())
-    }
+impl Fetcher for Linked {
+    type Body = ();
 
-    /// `GET /v1/segments/{id}` through the link; the body's length.
-    async fn segment(remote: Remote, pipe: Arc<Pipe>, id: u32) -> (u32, anyhow::Result<u64>) {
-        pipe.send().await;
-        let got = remote.segment(id).await;
-        if let Ok(b) = &got {
-            pipe.deliver(b.len() as u64).await;
-        }
-        (id, got.map(|b| b.len() as u64))
-    }
-
-    /// `POST /v1/prefetch` through the link.
-    async fn prefetch(&self, req: &PrefetchRequest) -> anyhow::Result<PrefetchResponse> {
-        self.pipe.send().await;
-        let resp = self.remote.prefetch(req).await?;
-        let body = portico_protocol::to_bincode(&resp).map_or(0, |b| b.len() as u64);
-        self.pipe.deliver(body).await;
-        Ok(resp)
-    }
-}
-
-/// The real client's prefetch loop (`io.rs`) through the emulated link.
-async fn prefetch_io(io: Io, policy: Policy, mut state: watch::Receiver<Option<Published>>) {
-    let mut delivered: HashMap<u32, u64> = HashMap::new();
-    let mut seq = 0u64;
-    while state.changed().await.is_ok() {
-        let Some(st) = state.borrow_and_update().clone() else {
-            continue;
-        };
-        delivered.retain(|_, s| *s >= st.consumed);
-        let held: HashSet<u32> = st.held.iter().chain(delivered.keys()).copied().collect();
-        let req = PrefetchRequest {
-            version: PROTOCOL_VERSION,
-            observer: st.observer,
-            policy,
-            held: portico_protocol::encode_held(held),
-        };
-        let t0 = Instant::now();
-        let resp = match io.prefetch(&req).await {
-            Ok(r) => r,
-            Err(e) => {
-                if io
-                    .send(&mut seq, Msg::Failed(format!("{e:#}")))
-                    .await
-                    .is_err()
-                {
-                    return;
-                }
-                continue;
-            }
-        };
-        let stat = AnswerStat {
-            range_cells: resp.range_cells,
-            lookahead_objects: resp.lookahead_objects,
-            lookahead_bytes: resp.lookahead_bytes,
-            micros: resp.micros,
-            items: resp.items.len() as u32,
-        };
-        if io.send(&mut seq, Msg::Answer(stat)).await.is_err()
-            || (!resp.evict.is_empty() && io.send(&mut seq, Msg::Hints(resp.evict)).await.is_err())
-        {
-            return;
-        }
-        let mut fetches = futures_util::stream::iter(resp.items)
-            .map(|item| Io::segment(io.remote.clone(), io.pipe.clone(), item.segment))
-            .buffered(PARALLEL);
-        while let Some((id, got)) = fetches.next().await {
-            let m = match got {
-                Ok(bytes) => {
-                    delivered.insert(id, seq);
-                    Msg::Segment {
-                        id,
-                        bytes,
-                        listed_at: t0,
-                    }
-                }
-                Err(e) => Msg::Failed(format!("{e:#}")),
-            };
-            if io.send(&mut seq, m).await.is_err() {
-                return;
-            }
+    fn prefetch(
+        &self,
+        req: PrefetchRequest,
+    ) -> impl Future<Output = anyhow::Result<PrefetchResponse>> + Send + 'static {
+        let me = self.clone();
+        async move {
+            me.pipe.send().await;
+            let resp = me.remote.prefetch(&req).await?;
+            let body = portico_protocol::to_bincode(&resp).map_or(0, |b| b.len() as u64);
+            me.pipe.deliver(body).await;
+            Ok(resp)
         }
     }
-}
 
-/// Demand fetch and the oracle: keep [`PARALLEL`] fetches going from the latest want list.
-async fn list_io(io: Io, mut state: watch::Receiver<Option<Published>>) {
-    let mut l = Lists::default();
-    let mut tasks: JoinSet<(u32, anyhow::Result<u64>)> = JoinSet::new();
-    let mut seq = 0u64;
-    loop {
-        while tasks.len() < PARALLEL {
-            let Some(id) = l.next() else { break };
-            l.inflight.insert(id);
-            tasks.spawn(Io::segment(io.remote.clone(), io.pipe.clone(), id));
+    fn segment(&self, id: u32) -> impl Future<Output = anyhow::Result<((), u64)>> + Send + 'static {
+        let me = self.clone();
+        async move {
+            me.pipe.send().await;
+            let b = me.remote.segment(id).await?;
+            me.pipe.deliver(b.len() as u64).await;
+            Ok(((), b.len() as u64))
         }
-        tokio::select! {
-            changed = state.changed() => {
-                if changed.is_err() {
-                    return;
-                }
-                if let Some(st) = state.borrow_and_update().clone() {
-                    l.refresh(st);
-                }
-            }
-            Some(done) = tasks.join_next(), if !tasks.is_empty() => {
-                let Ok((id, got)) = done else { continue };
-                l.inflight.remove(&id);
-                let m = match got {
-                    Ok(bytes) => {
-                        l.delivered.insert(id, seq);
-                        let listed_at = l.listed.remove(&id).unwrap_or_else(Instant::now);
-                        Msg::Segment { id, bytes, listed_at }
-                    }
-                    Err(e) => {
-                        l.failed.insert(id);
-                        Msg::Failed(format!("{e:#}"))
-                    }
-                };
-                if io.send(&mut seq, m).await.is_err() {
-                    return;
-                }
-            }
-        }
-    }
-}
-
-/// The bookkeeping of [`list_io`].
-#[derive(Default)]
-struct Lists {
-    wants: Vec<u32>,
-    cursor: usize,
-    /// When each wanted segment was first listed (since it was last out of every list).
-    listed: HashMap<u32, Instant>,
-    /// Delivered, with the arrival sequence number, until the frame loop has taken it.
-    delivered: HashMap<u32, u64>,
-    inflight: HashSet<u32>,
-    failed: HashSet<u32>,
-}
-
-impl Lists {
-    fn refresh(&mut self, st: Published) {
-        self.delivered.retain(|_, s| *s >= st.consumed);
-        let now: HashSet<u32> = st.wants.iter().copied().collect();
-        let inflight = &self.inflight;
-        self.listed
-            .retain(|id, _| now.contains(id) || inflight.contains(id));
-        for &id in &st.wants {
-            self.listed.entry(id).or_insert(st.at);
-        }
-        self.wants = st.wants;
-        self.cursor = 0;
-    }
-
-    /// The next wanted segment not on its way or already delivered.
-    fn next(&mut self) -> Option<u32> {
-        while let Some(&id) = self.wants.get(self.cursor) {
-            self.cursor += 1;
-            let busy = self.inflight.contains(&id)
-                || self.delivered.contains_key(&id)
-                || self.failed.contains(&id);
-            if !busy {
-                return Some(id);
-            }
-        }
-        None
     }
 }
 
@@ -674,45 +513,5 @@ mod tests {
         // Not wanted: not counted.
         count(&mut row, &c, &Choice::default());
         assert_eq!(row.wanted, 2);
-    }
-
-    #[test]
-    fn want_lists_skip_what_is_on_its_way_and_keep_first_listing_times() {
-        let t0 = Instant::now();
-        let published = |wants: Vec<u32>, consumed| Published {
-            observer: crate::loadtest::world::path_frames(
-                &portico_data::path::CameraPath {
-                    kind: "t".into(),
-                    keyframes: vec![portico_data::path::Keyframe {
-                        t: 0.0,
-                        eye: [0.0; 3],
-                        dir: [1.0, 0.0, 0.0],
-                    }],
-                },
-                0.05,
-                10.0,
-            )[0]
-            .observer,
-            held: Vec::new(),
-            wants,
-            consumed,
-            at: Instant::now(),
-        };
-        let mut l = Lists::default();
-        l.refresh(published(vec![1, 2, 3], 0));
-        let first = l.listed[&2];
-        assert!(first >= t0);
-        assert_eq!(l.next(), Some(1));
-        l.inflight.insert(1);
-        l.delivered.insert(2, 0); // arrival #0, not yet taken by the frame loop
-        assert_eq!(l.next(), Some(3));
-        assert_eq!(l.next(), None);
-        // The frame loop took arrival #0 and still wants 2 (it was evicted): fetch it again;
-        // 3 left the list and forgets its time; 1 is in flight and keeps its.
-        l.refresh(published(vec![2, 1], 1));
-        assert_eq!(l.listed[&2], first);
-        assert!(l.listed.contains_key(&1) && !l.listed.contains_key(&3));
-        assert_eq!(l.next(), Some(2));
-        assert_eq!(l.next(), None);
     }
 }

@@ -5,7 +5,7 @@
 //! what the elider would draw there if everything were resident.
 
 use crate::cost::CostModel;
-use crate::elision::{Algorithm, Candidate, Elider};
+use crate::elision::{Algorithm, Elider};
 use crate::net::Remote;
 use crate::render::Camera;
 use crate::view::{self, Viewpoint};
@@ -68,7 +68,7 @@ pub struct World {
     /// Frame time (s).
     pub dt: f64,
     /// The static size threshold (pixels per triangle) that caps every client's detail, as the
-    /// server caps the lookahead (see [`cap_detail`]).
+    /// server caps the lookahead (see [`view::cap_detail`]).
     pub size_threshold_px: f32,
 }
 
@@ -193,28 +193,6 @@ pub fn path_frames(path: &CameraPath, dt: f64, far: f32) -> Vec<PathFrame> {
         .collect()
 }
 
-/// Funkhouser ran his prefetch experiments (§5.3) with the optimizing elider "combined with a
-/// static detail elision size threshold": no object is drawn finer than the LOD whose average
-/// polygon covers `threshold` pixels — the same cap the server's lookahead puts on each object
-/// (`portico_data::prefetch::lookahead::max_lod`), so a client never wants a LOD no prefetch
-/// would ever send. Drops each candidate's finer LODs (keeping at least the coarsest) and
-/// returns, per candidate, how many were dropped (add it to a choice's LOD index).
-pub fn cap_detail(cands: &mut [Candidate], threshold: f32) -> Vec<usize> {
-    cands
-        .iter_mut()
-        .map(|c| {
-            let last = c.lods.len().saturating_sub(1);
-            let keep = c
-                .lods
-                .iter()
-                .position(|l| c.pixels / l.triangles.max(1) as f32 >= threshold)
-                .unwrap_or(last);
-            c.lods.drain(..keep);
-            keep
-        })
-        .collect()
-}
-
 /// What [`load`] needs to know about the run.
 #[derive(Debug, Clone, Copy)]
 pub struct Plan {
@@ -315,7 +293,7 @@ fn truth(world: &World, marked: &[bool], dt: f64) -> Vec<Option<Truth>> {
             &world.frustum(p),
         );
         let mut cands = view::candidates(&world.header, &vis.objects, &frame.viewpoint, &|_| true);
-        let dropped = cap_detail(&mut cands, world.size_threshold_px);
+        let dropped = view::cap_detail(&mut cands, world.size_threshold_px);
         let decided = elider.choose(&cands, &cost, None);
         let mut t = Truth::default();
         t.wants
@@ -351,27 +329,6 @@ mod tests {
         let on: Vec<usize> = (0..10).filter(|&i| r[i]).collect();
         assert_eq!(on, vec![0, 1, 2, 3, 8, 9]);
         assert!(reached(5, &[2], 100, 0).iter().all(|&b| b));
-    }
-
-    #[test]
-    fn detail_is_capped_at_the_size_threshold() {
-        use crate::elision::LodOption;
-        let lod = |triangles| LodOption {
-            triangles,
-            vertices: triangles,
-            error: 0.0,
-            resident: true,
-        };
-        let lods = vec![lod(1000), lod(100), lod(10)];
-        let mut cands = vec![
-            Candidate::new(0, lods.clone(), 16_000.0), // 16 px per triangle at the finest
-            Candidate::new(1, lods.clone(), 1_600.0),  // only the middle one reaches 16
-            Candidate::new(2, lods, 16.0),             // none does: keep the coarsest
-        ];
-        assert_eq!(cap_detail(&mut cands, 16.0), vec![0, 1, 2]);
-        let left: Vec<usize> = cands.iter().map(|c| c.lods.len()).collect();
-        assert_eq!(left, vec![3, 2, 1]);
-        assert_eq!(cands[1].lods[0].triangles, 100);
     }
 
     #[test]

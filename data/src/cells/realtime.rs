@@ -142,6 +142,27 @@ pub fn eye_to_object(reached: &[Reached], stab: &StabList, objects: &[Aabb]) -> 
     out
 }
 
+/// Eye-to-object visibility while the eye cell's stab list has not arrived: every object that
+/// touches a reached cell inside the wedge it is seen through. A superset of [`eye_to_object`]
+/// (a stab list only lists, per reached cell, objects touching it that some sightline reaches),
+/// so just as conservative, only looser; it needs nothing but the cell graph, which a client
+/// holds from the start. Linear in the objects: for the few frames a stab list is late.
+pub fn eye_to_object_unlisted(
+    graph: &CellGraph,
+    reached: &[Reached],
+    objects: &[Aabb],
+) -> Vec<u32> {
+    (0..objects.len() as u32)
+        .filter(|&o| {
+            let b = &objects[o as usize];
+            reached.iter().any(|r| {
+                touches(&graph.cells[r.cell as usize].bounds, b)
+                    && r.wedge.iter().all(|p| p.touches_box(b))
+            })
+        })
+        .collect()
+}
+
 /// Cells touching the view frustum (Table 4.1's FTC).
 pub fn frustum_to_cell(graph: &CellGraph, view: &Frustum) -> Vec<u32> {
     (0..graph.cells.len() as u32)

@@ -1,0 +1,290 @@
+//! The IO stage's read schedule and its driver (Funkhouser §5.2.3 and Ch. 6): the lookahead
+//! runs once per frame on the latest observer, and the IO process reads continuously from the
+//! top of the latest read set — never finishing a stale list while the observer walks on.
+//!
+//! [`drive`] is shared by the real client ([`crate::io`]) and the load tester's simulated
+//! clients ([`crate::loadtest::sim`]); what differs is the [`Fetcher`] (HTTP and a GPU upload,
+//! or HTTP through an emulated link) and where the need list comes from:
+//! - from the server: each published frame state becomes a `POST /v1/prefetch` (one at a time;
+//!   a newer state waits for the answer in flight), and the answer's items become the list;
+//! - from the client itself ([`Ask::wants`]): demand fetch and the oracle of the load tester.
+//!
+//! Every need list replaces the one before; segments in flight are never asked for twice, and
+//! a failed segment is retried after [`RETRY_AFTER`] if a later list still wants it.
+
+use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
+use std::collections::{HashMap, HashSet};
+use std::future::Future;
+use std::time::Duration;
+use tokio::sync::{mpsc, watch};
+use tokio::task::{JoinHandle, JoinSet};
+use tokio::time::Instant;
+
+/// How long a failed segment rests before a need list may ask for it again.
+pub const RETRY_AFTER: Duration = Duration::from_millis(500);
+
+/// What the frame loop publishes after each frame.
+#[derive(Debug, Clone)]
+pub struct Ask {
+    /// The observer, for the server's lookahead.
+    pub observer: Observer,
+    /// Segments resident in the cache.
+    pub held: Vec<u32>,
+    /// How many events the frame loop has taken from the queue so far.
+    pub consumed: u64,
+    /// The client's own need list, most urgent first (demand fetch, oracle); `None` asks the
+    /// server's lookahead instead.
+    pub wants: Option<Vec<u32>>,
+    /// When the frame loop published this.
+    pub at: Instant,
+}
+
+/// What the driver hands the frame loop.
+#[derive(Debug)]
+pub enum Event<B> {
+    /// A prefetch answer (its items are already scheduled; its eviction hints are for the
+    /// cache).
+    Answer(Box<PrefetchResponse>),
+    /// A segment arrived.
+    Segment {
+        /// Segment id.
+        id: u32,
+        /// What the fetcher made of it.
+        body: B,
+        /// Bytes on the wire.
+        bytes: u64,
+        /// When a need list first asked for it.
+        listed_at: Instant,
+    },
+    /// A request failed (the walk goes on; a later list may ask again).
+    Failed(String),
+}
+
+/// How the driver talks to the server.
+pub trait Fetcher: Clone + Send + Sync + 'static {
+    /// A fetched segment, ready for the cache.
+    type Body: Send + 'static;
+    /// `POST /v1/prefetch`.
+    fn prefetch(
+        &self,
+        req: PrefetchRequest,
+    ) -> impl Future<Output = anyhow::Result<PrefetchResponse>> + Send + 'static;
+    /// `GET /v1/segments/{id}`: the segment, checked and decoded, and its size on the wire.
+    fn segment(
+        &self,
+        id: u32,
+    ) -> impl Future<Output = anyhow::Result<(Self::Body, u64)>> + Send + 'static;
+}
+
+/// The bookkeeping of one client's reads.
+#[derive(Debug, Default)]
+pub struct Schedule {
+    wants: Vec<u32>,
+    cursor: usize,
+    /// When each wanted segment was first listed (since it was last out of every list).
+    listed: HashMap<u32, Instant>,
+    /// Delivered, with the event sequence number, until the frame loop has taken it.
+    delivered: HashMap<u32, u64>,
+    inflight: HashSet<u32>,
+    /// Failed, with the time it may be asked for again.
+    failed: HashMap<u32, Instant>,
+}
+
+impl Schedule {
+    /// A new need list, most urgent first, replacing the last one.
+    pub fn refresh(&mut self, wants: Vec<u32>, at: Instant) {
+        let now: HashSet<u32> = wants.iter().copied().collect();
+        let inflight = &self.inflight;
+        self.listed
+            .retain(|id, _| now.contains(id) || inflight.contains(id));
+        for &id in &wants {
+            self.listed.entry(id).or_insert(at);
+        }
+        self.wants = wants;
+        self.cursor = 0;
+    }
+
+    /// The frame loop has taken every event up to `consumed`: what it took is in its held set.
+    pub fn acknowledge(&mut self, consumed: u64) {
+        self.delivered.retain(|_, s| *s >= consumed);
+    }
+
+    /// Segments the server must not list again: delivered but not yet taken, or in flight.
+    pub fn pending(&self) -> impl Iterator<Item = u32> + '_ {
+        self.delivered.keys().chain(&self.inflight).copied()
+    }
+
+    /// The next wanted segment not on its way, delivered or resting after a failure; marks it
+    /// in flight.
+    pub fn next(&mut self, now: Instant) -> Option<u32> {
+        while let Some(&id) = self.wants.get(self.cursor) {
+            self.cursor += 1;
+            let resting = self.failed.get(&id).is_some_and(|&t| now < t);
+            if !(self.inflight.contains(&id) || self.delivered.contains_key(&id) || resting) {
+                self.inflight.insert(id);
+                return Some(id);
+            }
+        }
+        None
+    }
+
+    /// A fetch ended; `Ok(seq)` is the sequence number of its delivery. Returns when the segment
+    /// was first listed.
+    pub fn finished(&mut self, id: u32, outcome: Result<u64, ()>, now: Instant) -> Instant {
+        self.inflight.remove(&id);
+        match outcome {
+            Ok(seq) => {
+                self.failed.remove(&id);
+                self.delivered.insert(id, seq);
+            }
+            Err(()) => {
+                self.failed.insert(id, now + RETRY_AFTER);
+            }
+        }
+        self.listed.remove(&id).unwrap_or(now)
+    }
+}
+
+/// Runs the IO stage until the frame loop goes away: keeps `parallel` segment fetches busy from
+/// the latest need list and sends what happens on `tx`.
+pub async fn drive<F: Fetcher>(
+    fetcher: F,
+    policy: Policy,
+    parallel: usize,
+    mut state: watch::Receiver<Option<Ask>>,
+    tx: mpsc::Sender<Event<F::Body>>,
+) {
+    let mut s = Schedule::default();
+    let mut seq = 0u64;
+    let mut fetches: JoinSet<Fetched<F::Body>> = JoinSet::new();
+    let mut asking: Option<JoinHandle<Answered>> = None;
+    // A frame state the server has not yet been asked about.
+    let mut unasked: Option<Ask> = None;
+    loop {
+        if asking.is_none()
+            && let Some(ask) = unasked.take()
+        {
+            asking = Some(ask_server(&fetcher, &s, policy, ask));
+        }
+        while fetches.len() < parallel.max(1) {
+            let Some(id) = s.next(Instant::now()) else {
+                break;
+            };
+            let f = fetcher.clone();
+            fetches.spawn(async move { (id, f.segment(id).await) });
+        }
+        let event = tokio::select! {
+            changed = state.changed() => {
+                if changed.is_err() {
+                    break;
+                }
+                let Some(ask) = state.borrow_and_update().clone() else { continue };
+                s.acknowledge(ask.consumed);
+                match ask.wants {
+                    Some(ref wants) => s.refresh(wants.clone(), ask.at),
+                    None => unasked = Some(ask),
+                }
+                continue;
+            }
+            answered = async { asking.as_mut().expect("guarded").await }, if asking.is_some() => {
+                asking = None;
+                match answered {
+                    Ok((at, Ok(resp))) => {
+                        s.refresh(resp.items.iter().map(|i| i.segment).collect(), at);
+                        Event::Answer(Box::new(resp))
+                    }
+                    Ok((_, Err(e))) => Event::Failed(format!("{e:#}")),
+                    Err(e) => Event::Failed(format!("prefetch task: {e}")),
+                }
+            }
+            Some(done) = fetches.join_next(), if !fetches.is_empty() => {
+                let Ok((id, got)) = done else { continue };
+                let now = Instant::now();
+                match got {
+                    Ok((body, bytes)) => {
+                        let listed_at = s.finished(id, Ok(seq + 1), now);
+                        Event::Segment { id, body, bytes, listed_at }
+                    }
+                    Err(e) => {
+                        s.finished(id, Err(()), now);
+                        Event::Failed(format!("{e:#}"))
+                    }
+                }
+            }
+        };
+        seq += 1;
+        if tx.send(event).await.is_err() {
+            break;
+        }
+    }
+    fetches.abort_all();
+    if let Some(a) = asking {
+        a.abort();
+    }
+}
+
+/// A finished segment fetch: its id and what came of it.
+type Fetched<B> = (u32, anyhow::Result<(B, u64)>);
+/// A finished prefetch request: when it was asked, and the answer.
+type Answered = (Instant, anyhow::Result<PrefetchResponse>);
+
+/// Starts one `POST /v1/prefetch` for a frame state.
+fn ask_server<F: Fetcher>(
+    fetcher: &F,
+    s: &Schedule,
+    policy: Policy,
+    ask: Ask,
+) -> JoinHandle<Answered> {
+    let held: HashSet<u32> = ask.held.iter().copied().chain(s.pending()).collect();
+    let req = PrefetchRequest {
+        version: PROTOCOL_VERSION,
+        observer: ask.observer,
+        policy,
+        held: portico_protocol::encode_held(held),
+    };
+    let f = fetcher.clone();
+    tokio::spawn(async move {
+        let at = Instant::now();
+        (at, f.prefetch(req).await)
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lists_skip_what_is_on_its_way_and_keep_first_listing_times() {
+        let t0 = Instant::now();
+        let t1 = t0 + Duration::from_millis(50);
+        let mut s = Schedule::default();
+        s.refresh(vec![1, 2, 3], t0);
+        assert_eq!(s.next(t0), Some(1));
+        s.refresh(vec![1, 2, 4], t1);
+        // 1 is in flight: not asked again; 2 keeps its first listing; 4 is new.
+        assert_eq!(s.next(t1), Some(2));
+        assert_eq!(s.next(t1), Some(4));
+        assert_eq!(s.next(t1), None);
+        assert_eq!(s.finished(2, Ok(1), t1), t0);
+        assert_eq!(s.finished(4, Ok(2), t1), t1);
+        // Delivered and not yet taken: still pending for the server.
+        let mut pending: Vec<u32> = s.pending().collect();
+        pending.sort();
+        assert_eq!(pending, vec![1, 2, 4]);
+        s.acknowledge(3);
+        assert_eq!(s.pending().collect::<Vec<_>>(), vec![1]);
+    }
+
+    #[test]
+    fn a_failed_segment_rests_before_it_is_asked_again() {
+        let t0 = Instant::now();
+        let mut s = Schedule::default();
+        s.refresh(vec![7], t0);
+        assert_eq!(s.next(t0), Some(7));
+        s.finished(7, Err(()), t0);
+        s.refresh(vec![7], t0);
+        assert_eq!(s.next(t0), None, "resting");
+        s.refresh(vec![7], t0);
+        assert_eq!(s.next(t0 + RETRY_AFTER), Some(7), "asked again");
+    }
+}
