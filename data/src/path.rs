@@ -3,6 +3,7 @@
 //! (Funkhouser §7 replays recorded paths; DESIGN §5 `portico path --kind tour|spin|revisit`).
 
 use crate::cells::CellGraph;
+use crate::geometry::Aabb;
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -149,22 +150,39 @@ fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rn
         let Some(chain) = portal_chain(graph, at, target) else {
             continue;
         };
-        // Walk straight through each opening: a point a little before and a little after it,
-        // so the observer turns inside rooms, never standing in a portal's plane.
-        let mut from = *points.last().unwrap_or(&Vec3::ZERO);
+        // Walk straight through each opening: a point a little before it in the cell left and
+        // a little after it in the cell entered, each kept inside its cell. Consecutive points
+        // then share a cell, which is convex: the path never leaves the live cells, and the
+        // observer turns inside rooms, never standing in a portal's plane.
+        let mut cell = at;
         for &p in &chain {
             let portal = &graph.portals[p as usize];
-            let c = portal.rect.center();
-            let mut n = Vec3::ZERO;
+            let next = portal.other(cell);
+            let (here, there) = (
+                &graph.cells[cell as usize].bounds,
+                &graph.cells[next as usize].bounds,
+            );
             let a = portal.axis as usize;
-            n[a] = (c[a] - from[a]).signum();
-            points.extend([c - n * 0.4, c + n * 0.4]);
-            from = c + n * 0.4;
+            let mut n = Vec3::ZERO;
+            n[a] = (there.center()[a] - here.center()[a]).signum();
+            let c = portal.rect.center();
+            points.extend([within(here, c - n * 0.4), within(there, c + n * 0.4)]);
+            cell = next;
         }
         points.push(graph.cells[target as usize].bounds.center());
         at = target;
     }
     points
+}
+
+/// `p` moved inside `b`, at least a little (5 cm, or a quarter of a thin box) from its faces.
+fn within(b: &Aabb, p: Vec3) -> Vec3 {
+    let mut q = p;
+    for i in 0..3 {
+        let margin = (0.25 * (b.max[i] - b.min[i])).min(0.05);
+        q[i] = p[i].clamp(b.min[i] + margin, b.max[i] - margin);
+    }
+    q
 }
 
 fn biggest_cell(graph: &CellGraph, live: &[u32]) -> u32 {

@@ -273,3 +273,23 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn standard_tours_stay_inside_live_cells() {
+    use portico_data::path::{PathKind, generate};
+    let (g, ..) = tiny();
+    for seed in 1..6 {
+        let path = generate(g, PathKind::Revisit, 4, seed, 1.5, 1.5).unwrap();
+        let end = path.duration();
+        let steps = (end / 0.02).ceil() as usize;
+        for i in 0..=steps {
+            let t = end * i as f32 / steps as f32;
+            let (eye, _) = path.sample(t);
+            let cell = g.locate(eye);
+            assert!(
+                cell.is_some_and(|c| g.cells[c as usize].live),
+                "seed {seed}: at t = {t:.2} s the eye {eye} is in no live cell ({cell:?})"
+            );
+        }
+    }
+}
