@@ -7,7 +7,7 @@
 
 use crate::net::Remote;
 use crate::render::{GpuMesh, Uploader};
-use crate::schedule::{Ask, Event, Fetcher, drive};
+use crate::schedule::{Ask, Event, Fetcher, Items, drive};
 use anyhow::bail;
 use portico_data::cells::StabList;
 use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse, SegmentInfo};
@@ -64,16 +64,28 @@ impl Fetcher for Http {
         async move { remote.prefetch(&req).await }
     }
 
-    fn segment(
+    fn batch(
         &self,
-        id: u32,
-    ) -> impl Future<Output = anyhow::Result<(Payload, u64)>> + Send + 'static {
+        ids: Vec<u32>,
+    ) -> impl Future<Output = anyhow::Result<Items<Payload>>> + Send + 'static {
         let me = self.clone();
         async move {
-            let bytes = me.remote.segment(id).await?;
-            let payload = me.decode(id, &bytes)?;
-            Ok((payload, bytes.len() as u64))
+            let got = me.remote.batch(&ids).await?;
+            Ok(got
+                .into_iter()
+                .map(|(id, bytes)| {
+                    let item = me.decode(id, &bytes).map(|p| (p, bytes.len() as u64));
+                    (id, item)
+                })
+                .collect())
         }
+    }
+
+    fn bytes(&self, id: u32) -> u64 {
+        self.catalogue
+            .segments
+            .get(id as usize)
+            .map_or(0, |s| s.bytes)
     }
 }
 

@@ -89,6 +89,19 @@ impl Remote {
         .await
     }
 
+    /// `GET /v1/batch?ids=...`: several segments in one round trip, in the order asked.
+    pub async fn batch(&self, ids: &[u32]) -> Result<Vec<(u32, Bytes)>> {
+        let list: Vec<String> = ids.iter().map(u32::to_string).collect();
+        let what = format!("batch of {} segments", ids.len());
+        let body = self
+            .fetch(
+                self.get(&format!("/v1/batch?ids={}", list.join(","))),
+                &what,
+            )
+            .await?;
+        parse_batch(&body).with_context(|| format!("{}: {what}", self.base))
+    }
+
     /// `POST /v1/prefetch`.
     pub async fn prefetch(&self, req: &PrefetchRequest) -> Result<PrefetchResponse> {
         let body = portico_protocol::to_bincode(req)?;
@@ -106,10 +119,56 @@ impl Remote {
     }
 }
 
+/// Splits a `/v1/batch` body: per segment its id (`u32` LE), its length (`u64` LE) and its
+/// bytes (slices of the body, not copies).
+pub fn parse_batch(body: &Bytes) -> Result<Vec<(u32, Bytes)>> {
+    let mut out = Vec::new();
+    let mut at = 0usize;
+    while at < body.len() {
+        let head = body
+            .get(at..at + 12)
+            .context("batch body truncated in a segment header")?;
+        let id = u32::from_le_bytes(head[..4].try_into()?);
+        let len = usize::try_from(u64::from_le_bytes(head[4..].try_into()?))?;
+        let start = at + 12;
+        let end = start
+            .checked_add(len)
+            .filter(|&e| e <= body.len())
+            .with_context(|| format!("batch body truncated in segment {id}"))?;
+        out.push((id, body.slice(start..end)));
+        at = end;
+    }
+    Ok(out)
+}
+
 /// Fetches a server's cell graph from synchronous code (e.g. to make a path before a walk).
 pub fn cells_blocking(remote: &Remote) -> Result<CellGraph> {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
     rt.block_on(remote.cells())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn batch_bodies_split_into_their_segments_and_truncation_is_an_error() {
+        let mut b = Vec::new();
+        for (id, data) in [(7u32, &b"abc"[..]), (2, &b""[..]), (9, &b"xy"[..])] {
+            b.extend_from_slice(&id.to_le_bytes());
+            b.extend_from_slice(&(data.len() as u64).to_le_bytes());
+            b.extend_from_slice(data);
+        }
+        let body = Bytes::from(b);
+        let parts = parse_batch(&body).unwrap();
+        let ids: Vec<u32> = parts.iter().map(|p| p.0).collect();
+        assert_eq!(ids, vec![7, 2, 9]);
+        assert_eq!(&parts[0].1[..], b"abc");
+        assert_eq!(&parts[2].1[..], b"xy");
+        assert!(parse_batch(&body.slice(..body.len() - 1)).is_err());
+        assert!(parse_batch(&body.slice(..5)).is_err());
+        assert!(parse_batch(&Bytes::new()).unwrap().is_empty());
+    }
 }

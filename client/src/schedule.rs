@@ -22,6 +22,11 @@ use tokio::time::Instant;
 
 /// How long a failed segment rests before a need list may ask for it again.
 pub const RETRY_AFTER: Duration = Duration::from_millis(500);
+/// Most segments one read request carries: one round trip brings several segments (a link's
+/// latency, not its bandwidth, limits many small reads), while the most urgent still come first.
+pub const BATCH_ITEMS: usize = 16;
+/// Most bytes one read request carries (a single bigger segment goes alone).
+pub const BATCH_BYTES: u64 = 256 << 10;
 
 /// What the frame loop publishes after each frame.
 #[derive(Debug, Clone)]
@@ -69,11 +74,14 @@ pub trait Fetcher: Clone + Send + Sync + 'static {
         &self,
         req: PrefetchRequest,
     ) -> impl Future<Output = anyhow::Result<PrefetchResponse>> + Send + 'static;
-    /// `GET /v1/segments/{id}`: the segment, checked and decoded, and its size on the wire.
-    fn segment(
+    /// `GET /v1/batch`: the segments, each checked and decoded (or why not), with its size on
+    /// the wire; the whole request may fail too.
+    fn batch(
         &self,
-        id: u32,
-    ) -> impl Future<Output = anyhow::Result<(Self::Body, u64)>> + Send + 'static;
+        ids: Vec<u32>,
+    ) -> impl Future<Output = anyhow::Result<Items<Self::Body>>> + Send + 'static;
+    /// A segment's size in bytes (from the manifest), to size the batches.
+    fn bytes(&self, id: u32) -> u64;
 }
 
 /// The bookkeeping of one client's reads.
@@ -114,18 +122,32 @@ impl Schedule {
         self.delivered.keys().chain(&self.inflight).copied()
     }
 
-    /// The next wanted segment not on its way, delivered or resting after a failure; marks it
-    /// in flight.
-    pub fn next(&mut self, now: Instant) -> Option<u32> {
+    /// The next wanted segment not on its way, delivered or resting after a failure (the list
+    /// moves past what it skips).
+    pub fn peek(&mut self, now: Instant) -> Option<u32> {
         while let Some(&id) = self.wants.get(self.cursor) {
-            self.cursor += 1;
             let resting = self.failed.get(&id).is_some_and(|&t| now < t);
             if !(self.inflight.contains(&id) || self.delivered.contains_key(&id) || resting) {
-                self.inflight.insert(id);
                 return Some(id);
             }
+            self.cursor += 1;
         }
         None
+    }
+
+    /// Marks the segment [`Schedule::peek`] gave as in flight.
+    pub fn take(&mut self, id: u32) {
+        if self.wants.get(self.cursor) == Some(&id) {
+            self.cursor += 1;
+        }
+        self.inflight.insert(id);
+    }
+
+    /// [`Schedule::peek`] then [`Schedule::take`].
+    pub fn next(&mut self, now: Instant) -> Option<u32> {
+        let id = self.peek(now)?;
+        self.take(id);
+        Some(id)
     }
 
     /// A fetch ended; `Ok(seq)` is the sequence number of its delivery. Returns when the segment
@@ -167,11 +189,15 @@ pub async fn drive<F: Fetcher>(
             asking = Some(ask_server(&fetcher, &s, policy, ask));
         }
         while fetches.len() < parallel.max(1) {
-            let Some(id) = s.next(Instant::now()) else {
+            let ids = next_batch(&mut s, &fetcher);
+            if ids.is_empty() {
                 break;
-            };
+            }
             let f = fetcher.clone();
-            fetches.spawn(async move { (id, f.segment(id).await) });
+            fetches.spawn(async move {
+                let got = f.batch(ids.clone()).await;
+                (ids, got)
+            });
         }
         let event = tokio::select! {
             changed = state.changed() => {
@@ -198,18 +224,11 @@ pub async fn drive<F: Fetcher>(
                 }
             }
             Some(done) = fetches.join_next(), if !fetches.is_empty() => {
-                let Ok((id, got)) = done else { continue };
-                let now = Instant::now();
-                match got {
-                    Ok((body, bytes)) => {
-                        let listed_at = s.finished(id, Ok(seq + 1), now);
-                        Event::Segment { id, body, bytes, listed_at }
-                    }
-                    Err(e) => {
-                        s.finished(id, Err(()), now);
-                        Event::Failed(format!("{e:#}"))
-                    }
+                let Ok((ids, got)) = done else { continue };
+                if deliver(&mut s, ids, got, &mut seq, &tx).await.is_err() {
+                    break;
                 }
+                continue;
             }
         };
         seq += 1;
@@ -223,8 +242,80 @@ pub async fn drive<F: Fetcher>(
     }
 }
 
-/// A finished segment fetch: its id and what came of it.
-type Fetched<B> = (u32, anyhow::Result<(B, u64)>);
+/// What one read request brings: each segment (id, then its body and size on the wire, or why
+/// not).
+pub type Items<B> = Vec<(u32, anyhow::Result<(B, u64)>)>;
+/// A finished read request: the ids asked for and what came of them.
+type Fetched<B> = (Vec<u32>, anyhow::Result<Items<B>>);
+
+/// The next read request: the most urgent wanted segments, up to [`BATCH_ITEMS`] and
+/// [`BATCH_BYTES`] (at least one).
+fn next_batch<F: Fetcher>(s: &mut Schedule, fetcher: &F) -> Vec<u32> {
+    let now = Instant::now();
+    let mut ids = Vec::new();
+    let mut bytes = 0u64;
+    while ids.len() < BATCH_ITEMS {
+        let Some(id) = s.peek(now) else { break };
+        let b = fetcher.bytes(id);
+        if !ids.is_empty() && bytes + b > BATCH_BYTES {
+            break;
+        }
+        s.take(id);
+        bytes += b;
+        ids.push(id);
+    }
+    ids
+}
+
+/// Hands one finished read request's segments to the frame loop, one event each (one event
+/// for a request that failed as a whole). `Err` when the frame loop is gone.
+async fn deliver<B>(
+    s: &mut Schedule,
+    ids: Vec<u32>,
+    got: anyhow::Result<Items<B>>,
+    seq: &mut u64,
+    tx: &mpsc::Sender<Event<B>>,
+) -> Result<(), ()> {
+    let now = Instant::now();
+    let items = match got {
+        Ok(items) => items,
+        Err(e) => {
+            for id in ids {
+                s.finished(id, Err(()), now);
+            }
+            *seq += 1;
+            return tx
+                .send(Event::Failed(format!("{e:#}")))
+                .await
+                .map_err(|_| ());
+        }
+    };
+    let mut answered = HashSet::new();
+    for (id, item) in items {
+        answered.insert(id);
+        let event = match item {
+            Ok((body, bytes)) => {
+                let listed_at = s.finished(id, Ok(*seq + 1), now);
+                Event::Segment {
+                    id,
+                    body,
+                    bytes,
+                    listed_at,
+                }
+            }
+            Err(e) => {
+                s.finished(id, Err(()), now);
+                Event::Failed(format!("{e:#}"))
+            }
+        };
+        *seq += 1;
+        tx.send(event).await.map_err(|_| ())?;
+    }
+    for id in ids.into_iter().filter(|id| !answered.contains(id)) {
+        s.finished(id, Err(()), now);
+    }
+    Ok(())
+}
 /// A finished prefetch request: when it was asked, and the answer.
 type Answered = (Instant, anyhow::Result<PrefetchResponse>);
 

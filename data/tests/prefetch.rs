@@ -237,3 +237,61 @@ fn an_observer_outside_the_building_is_answered_from_the_nearest_cell() {
     assert!(r.range_cells >= 1);
     assert!(!r.items.is_empty());
 }
+
+#[test]
+fn what_the_observer_sees_now_is_read_before_the_rest_of_the_lookahead() {
+    let p = prefetcher(false);
+    let db = p.database();
+    let header = db.header();
+    let objects: Vec<_> = header.instances.iter().map(|i| i.bounds).collect();
+    let policy = Policy {
+        read_bytes: u64::MAX,
+        range_cull: RangeCull::Any,
+        ..Policy::default()
+    };
+    let g = p.graph().unwrap();
+    let mut checked = 0;
+    for obs in observers(p) {
+        let view = Frustum::new(obs.eye.into(), obs.dir.into(), Vec3::Y, 0.6, 0.45);
+        let cell = g.locate(obs.eye.into()).unwrap();
+        let stab = p.stab(cell).unwrap();
+        let in_view: HashSet<u32> = eye_to_object(&eye_to_cell(g, &view), &stab, &objects)
+            .into_iter()
+            .collect();
+        // Segments of objects in view, and of no object out of it (definitions are shared).
+        let mut seen = HashSet::new();
+        let mut unseen = HashSet::new();
+        for (i, inst) in header.instances.iter().enumerate() {
+            let set = if in_view.contains(&(i as u32)) {
+                &mut seen
+            } else {
+                &mut unseen
+            };
+            set.extend(header.lods_of(inst).iter().map(|l| l.segment));
+        }
+        let (seen, unseen): (HashSet<u32>, HashSet<u32>) = (
+            seen.difference(&unseen).copied().collect(),
+            unseen.difference(&seen).copied().collect(),
+        );
+        let r = p.answer(&obs, &policy, &HashSet::new()).unwrap();
+        let geo: Vec<u32> = r
+            .items
+            .iter()
+            .filter(|i| i.kind == NeedKind::Geometry)
+            .map(|i| i.segment)
+            .collect();
+        let first_other = geo.iter().position(|s| unseen.contains(s));
+        let last_seen = geo.iter().rposition(|s| seen.contains(s));
+        if let (Some(first_other), Some(last_seen)) = (first_other, last_seen) {
+            assert!(
+                last_seen < first_other,
+                "a segment of an unseen object (at {first_other}) before one in view (at {last_seen})"
+            );
+            checked += 1;
+        }
+    }
+    assert!(
+        checked > 0,
+        "some observer sees something and has more ahead"
+    );
+}

@@ -1,10 +1,12 @@
 //! `portico loadtest --server URL --clients N (--path FILE | --path-kind tour) [--policy SPEC |
 //! --sweep [reduced|full|depth|gran|cull]] [--link rtt=20ms,rate=100mbit] [--cache-mb 64]
 //! [--budget-ms 50] [--max-frames F] --out DIR`: simulated clients against a real server, to
-//! measure prefetch policies against demand fetch and an oracle (DESIGN §7, Funkhouser §5.3).
+//! measure prefetch policies against demand fetch and an oracle (DESIGN §7, Funkhouser §5.3);
+//! with `--stress 1,16,64`, the server's prefetch latency at those numbers of clients instead.
 
 use crate::progress::Bars;
 use anyhow::{Context, Result};
+use portico_client::loadtest::stress::{StressConfig, level};
 use portico_client::loadtest::{Link, LoadtestConfig, LoadtestSummary, grid, run as run_loadtest};
 use portico_client::policy::{parse_policy, policy_spec};
 use portico_protocol::Policy;
@@ -67,6 +69,17 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     json: bool,
+    /// Instead of the policy runs: the server's prefetch latency at these numbers of
+    /// concurrent clients (e.g. 1,16,64), each client posting one request per frame along the
+    /// path; writes DIR/stress.json.
+    #[arg(long, value_delimiter = ',', value_name = "CLIENTS")]
+    stress: Vec<usize>,
+    /// Seconds per stress level.
+    #[arg(long, default_value_t = 10.0)]
+    stress_seconds: f64,
+    /// Stress clients post back to back instead of once per frame (the server's throughput).
+    #[arg(long)]
+    closed_loop: bool,
 }
 
 /// The policies to run: one from `--policy`, or the `--sweep` grid on top of it.
@@ -95,6 +108,9 @@ pub fn run(a: Args) -> Result<()> {
         a.legs,
         a.seed,
     )?;
+    if !a.stress.is_empty() {
+        return stress(&a, path, policies[0].1);
+    }
     let cfg = LoadtestConfig {
         server: a.server,
         token: a.token,
@@ -126,6 +142,76 @@ pub fn run(a: Args) -> Result<()> {
     } else {
         print_summary(&summary, &cfg.out);
     }
+    Ok(())
+}
+
+/// `--stress`: prefetch latency per level of concurrency, a table and DIR/stress.json.
+fn stress(a: &Args, path: portico_data::path::CameraPath, policy: Policy) -> Result<()> {
+    let cfg = StressConfig {
+        server: a.server.clone(),
+        token: a.token.clone(),
+        path,
+        policy,
+        frame_s: a.budget_ms / 1e3,
+        paced: !a.closed_loop,
+        duration: std::time::Duration::from_secs_f64(a.stress_seconds.clamp(0.1, 3600.0)),
+    };
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?;
+    println!(
+        "prefetch stress against {} ({}, {} s per level)",
+        a.server,
+        if cfg.paced {
+            format!("one request per {} ms frame per client", a.budget_ms)
+        } else {
+            "closed loop".into()
+        },
+        a.stress_seconds
+    );
+    println!(
+        "  {:>7} {:>9} {:>8} {:>7} {:>9} {:>9} {:>9} {:>14} {:>6}",
+        "clients",
+        "requests",
+        "req/s",
+        "errors",
+        "p50 ms",
+        "p99 ms",
+        "max ms",
+        "server mean ms",
+        "items"
+    );
+    let mut levels = Vec::new();
+    for &n in &a.stress {
+        let l = rt.block_on(level(&cfg, n.max(1)))?;
+        println!(
+            "  {:>7} {:>9} {:>8.0} {:>7} {:>9.3} {:>9.3} {:>9.3} {:>14.3} {:>6.0}",
+            l.clients,
+            l.requests,
+            l.rps,
+            l.errors,
+            l.latency_s.p50 * 1e3,
+            l.latency_s.p99 * 1e3,
+            l.latency_s.max * 1e3,
+            l.server_compute_s.mean * 1e3,
+            l.items.mean
+        );
+        levels.push(l);
+    }
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let json = serde_json::json!({
+        "server": a.server,
+        "paced": cfg.paced,
+        "frame_ms": a.budget_ms,
+        "seconds_per_level": a.stress_seconds,
+        "policy": policy_spec(&policy),
+        "cores": std::thread::available_parallelism().map_or(1, |n| n.get()),
+        "levels": levels,
+    });
+    let out = a.out.join("stress.json");
+    std::fs::write(&out, serde_json::to_vec_pretty(&json)?)
+        .with_context(|| format!("writing {}", out.display()))?;
+    println!("  wrote {}", out.display());
     Ok(())
 }
 

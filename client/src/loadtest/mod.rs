@@ -23,6 +23,7 @@ pub mod link;
 pub mod plot;
 pub mod report;
 pub mod sim;
+pub mod stress;
 pub mod sweep;
 pub mod world;
 

@@ -20,7 +20,7 @@ use crate::cache::ObjectCache;
 use crate::cost::CostModel;
 use crate::elision::{Algorithm, Candidate, Choice, Elider};
 use crate::net::Remote;
-use crate::schedule::{Ask, Event, Fetcher, drive};
+use crate::schedule::{Ask, Event, Fetcher, Items, drive};
 use crate::view;
 use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse};
 use std::collections::{HashMap, HashSet};
@@ -142,6 +142,7 @@ pub async fn client(s: Setup) -> ClientResult {
     let link = Linked {
         remote: s.remote.clone(),
         pipe: s.pipe.clone(),
+        world: s.world.clone(),
     };
     // Demand fetch and the oracle make their own lists; the policy only matters to prefetch.
     let policy = match s.mode {
@@ -447,6 +448,7 @@ fn count(row: &mut FrameStat, c: &Candidate, ch: &Choice) {
 struct Linked {
     remote: Remote,
     pipe: Arc<Pipe>,
+    world: Arc<World>,
 }
 
 impl Fetcher for Linked {
@@ -466,14 +468,25 @@ impl Fetcher for Linked {
         }
     }
 
-    fn segment(&self, id: u32) -> impl Future<Output = anyhow::Result<((), u64)>> + Send + 'static {
+    fn batch(
+        &self,
+        ids: Vec<u32>,
+    ) -> impl Future<Output = anyhow::Result<Items<()>>> + Send + 'static {
         let me = self.clone();
         async move {
             me.pipe.send().await;
-            let b = me.remote.segment(id).await?;
-            me.pipe.deliver(b.len() as u64).await;
-            Ok(((), b.len() as u64))
+            let got = me.remote.batch(&ids).await?;
+            let total = got.iter().map(|(_, b)| 12 + b.len() as u64).sum();
+            me.pipe.deliver(total).await;
+            Ok(got
+                .into_iter()
+                .map(|(id, b)| (id, Ok(((), b.len() as u64))))
+                .collect())
         }
+    }
+
+    fn bytes(&self, id: u32) -> u64 {
+        self.world.bytes(id)
     }
 }
 

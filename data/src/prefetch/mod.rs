@@ -3,9 +3,10 @@
 //!
 //! - [`range`]: the observer range and the range cells (§5.2.1, Dijkstra in frames-to-enter).
 //! - [`lookahead`]: the lookahead objects and each one's maximum LOD (§5.2.2).
-//! - this module: the read set — stab lists of the range cells first, then geometry ordered by
-//!   LOD (coarsest first) and by when it can become visible, cut at the read budget but never
-//!   before the coarsest LOD of everything visible now — and the release hints (§5.2.3).
+//! - this module: the read set — stab lists of the range cells first, then the geometry of what
+//!   the observer sees right now, then the rest, each ordered by LOD (coarsest first) and by
+//!   when it can become visible, cut at the read budget but never before the coarsest LOD of
+//!   everything visible from the eye cell — and the release hints (§5.2.3).
 //!
 //! The algorithm is pure: the server answers `/v1/prefetch` and drives `/v1/stream` with it, and
 //! the load tester's oracle and baselines call it directly.
@@ -14,9 +15,11 @@ pub mod lookahead;
 pub mod range;
 
 use crate::Database;
+use crate::cells::realtime::{Frustum, eye_to_cell, eye_to_object};
 use crate::cells::{CellGraph, StabList};
 use crate::error::Result;
 use crate::format::SegmentKind;
+use crate::geometry::Aabb;
 use portico_protocol::{
     Granularity, NeedItem, NeedKind, Observer, PROTOCOL_VERSION, Policy, PrefetchResponse,
 };
@@ -30,6 +33,7 @@ pub struct Prefetcher {
     db: Arc<Database>,
     graph: Option<CellGraph>,
     stabs: Vec<OnceLock<Arc<StabList>>>,
+    bounds: Vec<Aabb>,
 }
 
 impl std::fmt::Debug for Prefetcher {
@@ -41,6 +45,8 @@ impl std::fmt::Debug for Prefetcher {
 /// One geometry candidate before ordering.
 #[derive(Debug, Clone, Copy)]
 struct Candidate {
+    /// The object is in the observer's view right now (eye-to-object visibility).
+    now: bool,
     level: u32,
     frames: u32,
     seq: u32,
@@ -52,10 +58,12 @@ impl Prefetcher {
     pub fn new(db: Arc<Database>) -> Result<Prefetcher> {
         let graph = db.cell_graph()?;
         let n = graph.as_ref().map_or(0, |g| g.cells.len());
+        let bounds = db.header().instances.iter().map(|i| i.bounds).collect();
         Ok(Prefetcher {
             db,
             graph,
             stabs: (0..n).map(|_| OnceLock::new()).collect(),
+            bounds,
         })
     }
 
@@ -129,6 +137,7 @@ impl Prefetcher {
         policy: &Policy,
     ) -> Result<(u32, Vec<NeedItem>, Vec<Candidate>, u32)> {
         let ranged = range::range_cells(graph, range, policy.range_cull);
+        let now = self.visible_now(graph, obs)?;
         let mut stab_items = Vec::new();
         let mut seen_obj = vec![false; self.db.header().instances.len()];
         let mut seen_cell = vec![false; graph.cells.len()];
@@ -164,7 +173,11 @@ impl Prefetcher {
                     if std::mem::replace(&mut seen_obj[o as usize], true) {
                         continue;
                     }
+                    let first = cands.len();
                     claimed += self.add_object(o, frames, range, obs, policy, &mut cands);
+                    if now.contains(&o) {
+                        cands[first..].iter_mut().for_each(|c| c.now = true);
+                    }
                 }
                 // §5.2.2 condition 2: memory is claimed, and everything visible now is in.
                 if frames > 0 && claimed > policy.cache_bytes {
@@ -173,6 +186,39 @@ impl Prefetcher {
             }
         }
         Ok((ranged.len() as u32, stab_items, cands, lookahead_cells))
+    }
+
+    /// The objects in the observer's view right now: eye-to-object visibility from the eye
+    /// cell's stab list through the portals (§4.1.2), as the client culls. Empty outside every
+    /// live cell.
+    fn visible_now(&self, graph: &CellGraph, obs: &Observer) -> Result<HashSet<u32>> {
+        let eye = glam::Vec3::from(obs.eye);
+        let Some(cell) = graph.locate(eye).filter(|&c| graph.cells[c as usize].live) else {
+            return Ok(HashSet::new());
+        };
+        let dir = glam::Vec3::from(obs.dir)
+            .try_normalize()
+            .unwrap_or(glam::Vec3::NEG_Z);
+        let mut up = glam::Vec3::from(obs.up)
+            .try_normalize()
+            .unwrap_or(glam::Vec3::Y);
+        if up.cross(dir).length_squared() < 1e-6 {
+            up = if dir.y.abs() < 0.9 {
+                glam::Vec3::Y
+            } else {
+                glam::Vec3::X
+            };
+        }
+        let (hx, hy) = (
+            obs.half_fov_x.clamp(0.01, 1.55),
+            obs.half_fov_y.clamp(0.01, 1.55),
+        );
+        let view = Frustum::new(eye, dir, up, hx, hy);
+        let reached = eye_to_cell(graph, &view);
+        let stab = self.stab(cell)?;
+        Ok(eye_to_object(&reached, &stab, &self.bounds)
+            .into_iter()
+            .collect())
     }
 
     /// Without cells every object is a lookahead object, needed when the observer can reach it.
@@ -223,6 +269,7 @@ impl Prefetcher {
             let b = self.segment_bytes(l.segment);
             bytes += b;
             cands.push(Candidate {
+                now: false,
                 level: (lods.len() - 1 - i) as u32,
                 frames,
                 seq: cands.len() as u32,
@@ -252,16 +299,23 @@ fn need(segment: u32, kind: NeedKind, lod: u8, bytes: u64, frames: u32) -> NeedI
 }
 
 /// Orders the lookahead set into the read set and cuts it at `budget` bytes (§5.2.3): stab lists
-/// first, then geometry by LOD (coarsest first) and frames-until-visible. The coarsest LOD of
-/// everything visible now (and the eye cell's stab list) is always included, budget or not:
+/// first, then the geometry of the objects in the observer's view right now, then the rest;
+/// each group by LOD (coarsest first) and frames-until-visible. The coarsest LOD of everything
+/// visible from the eye cell (and its stab list) is always included, budget or not:
 /// Funkhouser's read set is not complete until everything visible now is resident or being read.
+///
+/// Funkhouser orders the whole read set by LOD, then frames: with a cold cache that reads the
+/// coarsest LOD of every object seen from anywhere in the range cells (hundreds) before the
+/// next LOD of the one in front of the observer. Reading the view's objects first keeps his
+/// guarantee and serves the current frame first (measured in the README: fewer LODs skipped
+/// while the cache warms up, the same once it is warm).
 fn read_set(
     stabs: Vec<NeedItem>,
     mut cands: Vec<Candidate>,
     held: &HashSet<u32>,
     budget: u64,
 ) -> PrefetchResponse {
-    cands.sort_unstable_by_key(|c| (c.level, c.frames, c.seq));
+    cands.sort_unstable_by_key(|c| (!c.now, c.level, c.frames, c.seq));
     let mut lookahead_segments = HashSet::new();
     let mut lookahead_bytes = 0u64;
     let mut objects = 0u32;
