@@ -166,3 +166,71 @@ fn bad_input_is_one_clear_line_and_leaves_nothing_behind() {
         .collect();
     assert!(leftovers.is_empty(), "temporary files left: {leftovers:?}");
 }
+
+/// `GET /healthz`-style plain HTTP/1.1 request; the body of a 200 answer.
+fn http_get(addr: &str, path: &str) -> Option<String> {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr).ok()?;
+    let req = format!(
+        "GET {path} HTTP/1.1\r\nHost: x\r\nAccept: application/json\r\nConnection: close\r\n\r\n"
+    );
+    s.write_all(req.as_bytes()).ok()?;
+    let mut out = String::new();
+    s.read_to_string(&mut out).ok()?;
+    out.starts_with("HTTP/1.1 200")
+        .then(|| out.split("\r\n\r\n").nth(1).unwrap_or("").to_string())
+}
+
+fn database_id(addr: &str) -> Option<String> {
+    let body = http_get(addr, "/v1/manifest")?;
+    let v: serde_json::Value = serde_json::from_str(&body).ok()?;
+    v["database_id"].as_str().map(str::to_string)
+}
+
+#[test]
+fn serve_picks_up_a_rebuilt_file_on_sighup() {
+    use std::io::BufRead;
+    let dir = tempfile::tempdir().unwrap();
+    let glb = generated(dir.path());
+    let db = dir.path().join("served.portico");
+    ok(&["build", s(&glb), "-o", s(&db)]);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_portico"))
+        .args(["serve", s(&db), "--listen", "127.0.0.1:0"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
+    let first = lines.next().unwrap().unwrap();
+    let addr = first.rsplit("http://").next().unwrap().trim().to_string();
+    let before = database_id(&addr).expect("manifest");
+    // A different model renamed over the served file, as a rebuild does.
+    let other = dir.path().join("other.glb");
+    ok(&[
+        "generate",
+        "--preset",
+        "tiny",
+        "--seed",
+        "9",
+        "-o",
+        s(&other),
+    ]);
+    ok(&["build", s(&other), "-o", s(&db)]);
+    assert_eq!(
+        database_id(&addr).as_deref(),
+        Some(before.as_str()),
+        "still the old map"
+    );
+    let hup = Command::new("kill")
+        .args(["-HUP", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(hup.success());
+    // The server says when it serves the new file.
+    let reloaded = lines.next().unwrap().unwrap();
+    assert!(reloaded.starts_with("serving "), "{reloaded}");
+    let after = database_id(&addr).expect("manifest after reload");
+    let _ = child.kill();
+    let _ = child.wait();
+    assert_ne!(before, after, "the rebuilt file is served");
+}
