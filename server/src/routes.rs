@@ -159,17 +159,19 @@ pub fn parse_range(value: &str, len: u64) -> Result<Option<(u64, u64)>, Unsatisf
 pub async fn segment(
     State(s): Shared,
     Path(raw): Path<String>,
-    headers: HeaderMap,
+    req: axum::extract::Request,
 ) -> Result<Response, Error> {
+    // The request itself rather than a `HeaderMap` extractor, which would copy every header.
+    let headers = req.headers();
     let id = parse_id(&raw, &s)?;
     let entry = s.db().segments()[id as usize];
-    let etag = format!("\"{:016x}\"", entry.checksum);
+    let etag = &s.etags[id as usize];
     let mut builder = Response::builder()
-        .header(header::ETAG, &etag)
-        .header(header::CACHE_CONTROL, IMMUTABLE)
-        .header(header::ACCEPT_RANGES, "bytes")
-        .header("x-portico-kind", entry.kind);
-    if not_modified(&headers, &etag) {
+        .header(header::ETAG, etag.clone())
+        .header(header::CACHE_CONTROL, HeaderValue::from_static(IMMUTABLE))
+        .header(header::ACCEPT_RANGES, HeaderValue::from_static("bytes"))
+        .header("x-portico-kind", HeaderValue::from(entry.kind));
+    if not_modified(headers, etag.to_str().unwrap_or("")) {
         return Ok(builder
             .status(StatusCode::NOT_MODIFIED)
             .body(Body::empty())
@@ -187,7 +189,10 @@ pub async fn segment(
             )
         })?,
     };
-    builder = builder.header(header::CONTENT_TYPE, "application/octet-stream");
+    builder = builder.header(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static("application/octet-stream"),
+    );
     let (status, body) = match range {
         Some((a, b)) => {
             builder = builder.header(header::CONTENT_RANGE, format!("bytes {a}-{b}/{len}"));

@@ -22,6 +22,8 @@ pub struct AppState {
     pub database_id: String,
     /// The manifest, bincode-encoded once at start-up.
     pub manifest_bincode: Bytes,
+    /// Each segment's strong ETag (its xxh3, quoted), made once at start-up.
+    pub etags: Vec<axum::http::HeaderValue>,
     manifest_json: OnceLock<Bytes>,
     cells_json: OnceLock<Bytes>,
     /// One permit per allowed stream session.
@@ -54,7 +56,16 @@ impl AppState {
             .map(Bytes::from)
             .map_err(|e| DataError::NotFound(format!("manifest does not encode: {e}")))?;
         let sessions = Arc::new(Semaphore::new(config.max_sessions));
+        let etags = db
+            .segments()
+            .iter()
+            .map(|e| {
+                axum::http::HeaderValue::from_str(&format!("\"{:016x}\"", e.checksum))
+                    .expect("hex digits are a valid header value")
+            })
+            .collect();
         Ok(Arc::new(AppState {
+            etags,
             prefetcher: Prefetcher::new(db)?,
             config,
             metrics: Metrics::default(),

@@ -1,8 +1,9 @@
 //! `portico loadtest --stress`: the server's prefetch answer under many concurrent clients
 //! (DESIGN §8: p99 ≤ 2 ms at 64 clients on 2 cores; Funkhouser's lookahead took 3 ms mean).
 //!
-//! Each client walks the path (client `i` starting `i/N` of the way along) and posts one
-//! `/v1/prefetch` per frame, as the real client does, holding everything earlier answers listed
+//! Each client walks the path (client `i` starting `i/N` of the way along and `i/N` of a frame
+//! later, as independent clients are out of phase) and posts one `/v1/prefetch` per frame, as
+//! the real client does, holding everything earlier answers listed
 //! (as if every read had arrived), so the answers stay the size of a walking client's. With
 //! `paced` off, each client posts again as soon as its answer is in (a closed loop: the
 //! server's throughput). Latency is measured at the client, request written to answer decoded,
@@ -59,15 +60,24 @@ pub struct StressLevel {
 
 /// Runs one level: `clients` concurrent clients for `cfg.duration`.
 pub async fn level(cfg: &StressConfig, clients: usize) -> Result<StressLevel> {
-    let remote = Remote::new(&cfg.server, cfg.token.clone())?;
     let frames = Arc::new(path_frames(&cfg.path, cfg.frame_s, 1e4));
     anyhow::ensure!(!frames.is_empty(), "the path has no frames");
     let start = Instant::now();
     let mut tasks = tokio::task::JoinSet::new();
     for i in 0..clients {
-        let (remote, frames, cfg) = (remote.clone(), frames.clone(), cfg.clone());
+        // Each client has its own connection, as separate machines would.
+        let remote = Remote::new(&cfg.server, cfg.token.clone())?;
+        let (frames, cfg) = (frames.clone(), cfg.clone());
         let offset = i * frames.len() / clients.max(1);
-        tasks.spawn(async move { one_client(&remote, &frames, offset, &cfg).await });
+        // Independent clients draw their frames out of phase: spread the first requests over
+        // one frame time (all in phase, 64 requests would land in the same millisecond).
+        let phase = Duration::from_secs_f64(cfg.frame_s * i as f64 / clients.max(1) as f64);
+        tasks.spawn(async move {
+            if cfg.paced {
+                tokio::time::sleep(phase).await;
+            }
+            one_client(&remote, &frames, offset, &cfg).await
+        });
     }
     let (mut lat, mut compute, mut items, mut errors) = (vec![], vec![], vec![], 0u64);
     while let Some(done) = tasks.join_next().await {
