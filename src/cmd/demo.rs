@@ -205,6 +205,8 @@ fn pictures(a: &Args, db: &Path, path: &CameraPath, out: &Path) -> Result<Pictur
     let mut frames: Vec<PathBuf> = std::fs::read_dir(out.join("walk/frames"))?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.extension().is_some_and(|x| x == "png"))
+        // The first frame is drawn before anything has arrived (the client never waits): sky.
+        .filter(|p| !p.ends_with("frame_00000.png"))
         .collect();
     frames.sort();
     let images: Vec<image::RgbaImage> = frames
