@@ -6,6 +6,7 @@ pub mod cost;
 pub mod elision;
 pub mod io;
 pub mod loadtest;
+pub mod navigate;
 pub mod net;
 pub mod policy;
 pub mod render;
@@ -14,3 +15,5 @@ pub mod sheet;
 pub mod stats;
 pub mod view;
 pub mod walk;
+#[cfg(feature = "window")]
+pub mod window;

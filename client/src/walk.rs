@@ -148,30 +148,143 @@ pub fn walk(cfg: &WalkConfig, on_frame: &mut dyn FnMut(u64, u64)) -> Result<Walk
         .validate()
         .map_err(anyhow::Error::msg)
         .context("the walk path")?;
-    let start = Instant::now();
-    let remote = Remote::new(&cfg.server, cfg.token.clone())?;
-    let model = load_model(&remote)?;
-    let mut renderer = Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
-    let cost = calibrate(&mut renderer)?;
-    let policy = Policy {
-        cache_bytes: cfg.cache_bytes,
-        screen: [cfg.size.0, cfg.size.1],
-        frame_time_s: cfg.budget_s as f32,
-        ..cfg.policy
-    };
-    let io = IoStage::start(
-        remote,
-        renderer.uploader(),
-        model.catalogue.clone(),
-        IoConfig {
-            policy,
-            parallel: 8,
-        },
-    )?;
-    let mut w = Walker::new(cfg, model, cost);
-    let result = w.run(&mut renderer, io, on_frame);
-    let rows = result?;
-    w.finish(&renderer, &rows, start.elapsed().as_secs_f64())
+    let mut session = Session::open(cfg)?;
+    let dt = cfg.budget_s.max(1e-3);
+    let total = ((cfg.path.duration() as f64 / dt).ceil() as u64 + 1)
+        .min(cfg.max_frames.unwrap_or(u64::MAX));
+    if let Some(out) = &cfg.out {
+        std::fs::create_dir_all(out.join("frames"))
+            .with_context(|| format!("creating {}", out.display()))?;
+    }
+    let mut outcome = Ok(());
+    for frame in 0..total {
+        let t0 = Instant::now();
+        let t = frame as f64 * dt;
+        let obs = session.path_observer(t);
+        if let Err(e) = session.frame(t, &obs) {
+            outcome = Err(e);
+            break;
+        }
+        on_frame(frame + 1, total);
+        if cfg.png_every > 0 && frame % cfg.png_every == 0 {
+            session.save_png(frame)?;
+        }
+        if cfg.pace {
+            std::thread::sleep(Duration::from_secs_f64(dt).saturating_sub(t0.elapsed()));
+        }
+    }
+    outcome?;
+    session.finish()
+}
+
+/// A connected client drawing one frame per observer it is given: the walk's frame loop
+/// without the path, so that a path ([`walk`]) or a person at a window drives it. Dropping it
+/// stops the IO stage.
+pub struct Session<'a> {
+    walker: Walker<'a>,
+    renderer: Renderer,
+    io: Option<IoStage>,
+    rows: Vec<FrameRow>,
+    start: Instant,
+}
+
+impl<'a> Session<'a> {
+    /// Loads the manifest and cell graph, starts the renderer (calibrating the cost model)
+    /// and the IO stage. `cfg.path` is only used by [`Session::path_observer`].
+    pub fn open(cfg: &'a WalkConfig) -> Result<Session<'a>> {
+        let start = Instant::now();
+        let remote = Remote::new(&cfg.server, cfg.token.clone())?;
+        let model = load_model(&remote)?;
+        let mut renderer =
+            Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
+        let cost = calibrate(&mut renderer)?;
+        let policy = Policy {
+            cache_bytes: cfg.cache_bytes,
+            screen: [cfg.size.0, cfg.size.1],
+            frame_time_s: cfg.budget_s as f32,
+            ..cfg.policy
+        };
+        let io = IoStage::start(
+            remote,
+            renderer.uploader(),
+            model.catalogue.clone(),
+            IoConfig {
+                policy,
+                parallel: 8,
+            },
+        )?;
+        Ok(Session {
+            walker: Walker::new(cfg, model, cost),
+            renderer,
+            io: Some(io),
+            rows: Vec::new(),
+            start,
+        })
+    }
+
+    /// The observer on the configured path at `t` seconds.
+    pub fn path_observer(&self, t: f64) -> Observer {
+        let dt = self.walker.cfg.budget_s.max(1e-3);
+        let (eye, dir) = self.walker.cfg.path.sample(t as f32);
+        let (next, _) = self.walker.cfg.path.sample((t + dt) as f32);
+        self.observer(eye, dir, (next - eye) / dt as f32)
+    }
+
+    /// An observer at `eye` looking along `dir`, moving at `velocity`, with this client's field
+    /// of view and announced speeds.
+    pub fn observer(&self, eye: Vec3, dir: Vec3, velocity: Vec3) -> Observer {
+        self.walker.observer(eye, dir, velocity)
+    }
+
+    /// Takes what arrived, then visibility → elision → render for `obs` (shown at `t` seconds,
+    /// the time of the frame's row), then tells the IO stage where the observer is. Never waits
+    /// for the network.
+    pub fn frame(&mut self, t: f64, obs: &Observer) -> Result<&FrameRow> {
+        let t0 = Instant::now();
+        let frame = self.rows.len() as u64;
+        let io = self.io.as_mut().context("the session is closed")?;
+        let mut row = FrameRow {
+            frame,
+            t,
+            ..FrameRow::default()
+        };
+        self.walker.take_arrivals(io, &mut row);
+        self.walker.frame(&mut self.renderer, obs, &mut row)?;
+        row.frame_s = t0.elapsed().as_secs_f64();
+        self.walker.last_frame_s = Some(row.frame_s);
+        self.walker.online.observe(row.predicted_s, row.render_s);
+        self.walker.publish(io, *obs);
+        self.rows.push(row);
+        Ok(&self.rows[self.rows.len() - 1])
+    }
+
+    /// The last frame's pixels.
+    pub fn image(&mut self) -> Result<image::RgbaImage> {
+        Ok(self.renderer.read_pixels()?)
+    }
+
+    /// Saves the last frame as `OUT/frames/frame_NNNNN.png` (when there is an output directory).
+    pub fn save_png(&mut self, frame: u64) -> Result<()> {
+        self.walker.save_png(&mut self.renderer, frame)
+    }
+
+    /// Stops the IO stage and returns the summary (and writes frames.csv and summary.json when
+    /// there is an output directory).
+    pub fn finish(mut self) -> Result<WalkSummary> {
+        if let Some(io) = self.io.take() {
+            io.stop();
+        }
+        let wall_s = self.start.elapsed().as_secs_f64();
+        self.walker.finish(&self.renderer, &self.rows, wall_s)
+    }
+}
+
+impl Drop for Session<'_> {
+    fn drop(&mut self) {
+        if let Some(io) = self.io.take() {
+            io.stop();
+        }
+    }
 }
 
 fn load_model(remote: &Remote) -> Result<Model> {
@@ -274,51 +387,6 @@ impl<'a> Walker<'a> {
         }
     }
 
-    fn run(
-        &mut self,
-        r: &mut Renderer,
-        mut io: IoStage,
-        on_frame: &mut dyn FnMut(u64, u64),
-    ) -> Result<Vec<FrameRow>> {
-        let dt = self.cfg.budget_s.max(1e-3);
-        let total = ((self.cfg.path.duration() as f64 / dt).ceil() as u64 + 1)
-            .min(self.cfg.max_frames.unwrap_or(u64::MAX));
-        let mut rows = Vec::with_capacity(total as usize);
-        if let Some(out) = &self.cfg.out {
-            std::fs::create_dir_all(out.join("frames"))
-                .with_context(|| format!("creating {}", out.display()))?;
-        }
-        let mut outcome = Ok(());
-        for frame in 0..total {
-            let t0 = Instant::now();
-            let mut row = FrameRow {
-                frame,
-                t: frame as f64 * dt,
-                ..FrameRow::default()
-            };
-            self.take_arrivals(&mut io, &mut row);
-            let obs = self.observer(row.t as f32, dt as f32);
-            if let Err(e) = self.frame(r, &obs, &mut row) {
-                outcome = Err(e);
-                break;
-            }
-            row.frame_s = t0.elapsed().as_secs_f64();
-            self.last_frame_s = Some(row.frame_s);
-            self.online.observe(row.predicted_s, row.render_s);
-            self.publish(&io, obs);
-            rows.push(row);
-            on_frame(frame + 1, total);
-            if self.cfg.png_every > 0 && frame % self.cfg.png_every == 0 {
-                self.save_png(r, frame)?;
-            }
-            if self.cfg.pace {
-                std::thread::sleep(Duration::from_secs_f64(dt).saturating_sub(t0.elapsed()));
-            }
-        }
-        io.stop();
-        outcome.map(|()| rows)
-    }
-
     /// Moves everything the IO stage delivered into the cache (never above its budget).
     fn take_arrivals(&mut self, io: &mut IoStage, row: &mut FrameRow) {
         while let Ok(a) = io.arrivals.try_recv() {
@@ -352,16 +420,14 @@ impl<'a> Walker<'a> {
         }
     }
 
-    fn observer(&self, t: f32, dt: f32) -> Observer {
-        let (eye, dir) = self.cfg.path.sample(t);
-        let (next, _) = self.cfg.path.sample(t + dt);
+    fn observer(&self, eye: Vec3, dir: Vec3, velocity: Vec3) -> Observer {
         let half_y = self.cfg.fovy * 0.5;
         let aspect = self.cfg.size.0 as f32 / self.cfg.size.1.max(1) as f32;
         Observer {
             eye: eye.into(),
             dir: dir.into(),
             up: [0.0, 1.0, 0.0],
-            velocity: ((next - eye) / dt).into(),
+            velocity: velocity.into(),
             half_fov_x: (half_y.tan() * aspect).atan(),
             half_fov_y: half_y,
             max_speed: self.cfg.max_speed,

@@ -65,6 +65,15 @@ pub struct Args {
     /// Print the summary as JSON.
     #[arg(long)]
     json: bool,
+    /// Walk interactively in a window (Funkhouser's mouse and keyboard navigation: hold the
+    /// left button to walk towards the cursor, right to back away, middle to spin; Control to
+    /// look up and down; arrows and keypad step; Escape quits). Starts where the path starts.
+    /// Needs a build with `--features window`.
+    #[arg(long)]
+    window: bool,
+    /// With --window: save the walk as a path JSON file here when the window closes.
+    #[arg(long, requires = "window")]
+    record: Option<PathBuf>,
 }
 
 /// Parses `WxH`.
@@ -137,6 +146,11 @@ pub fn run(a: Args) -> Result<()> {
         max_speed: 2.0,
         max_turn: 2.0,
     };
+    if a.window {
+        let summary = interactive(&cfg, a.record)?;
+        print_summary(&summary);
+        return Ok(());
+    }
     let bars = Bars::new();
     let mut started = false;
     let summary = walk(&cfg, &mut |done, total| {
@@ -154,6 +168,19 @@ pub fn run(a: Args) -> Result<()> {
         print_summary(&summary);
     }
     Ok(())
+}
+
+#[cfg(feature = "window")]
+fn interactive(cfg: &WalkConfig, record: Option<PathBuf>) -> Result<WalkSummary> {
+    portico_client::window::run(cfg, &portico_client::window::WindowOptions { record })
+}
+
+#[cfg(not(feature = "window"))]
+fn interactive(_: &WalkConfig, _: Option<PathBuf>) -> Result<WalkSummary> {
+    bail!(
+        "this portico was built without the `window` feature; build it with \
+         `cargo build --release --features window`"
+    )
 }
 
 /// A short human summary.

@@ -1,0 +1,232 @@
+//! `portico walk --window` (cargo feature `window`): the same client in a window, driven by the
+//! mouse and keyboard as Funkhouser §3.3.1 describes ([`crate::navigate`]), optionally recording
+//! the walk as a path (`--record`) that `portico walk --path` and `portico bench` replay.
+//!
+//! Frames are rendered by the same offscreen [`crate::render::Renderer`] as headless walks and
+//! shown through a software framebuffer (softbuffer), so the window works wherever the headless
+//! client does (llvmpipe included) at the price of one read-back per frame. The frame loop
+//! never waits for the network, exactly as in [`crate::walk`]; frames are paced to the budget.
+
+use crate::navigate::{Controls, Navigator, Recorder, Step};
+use crate::walk::{Session, WalkConfig, WalkSummary};
+use anyhow::{Context as _, Result};
+use std::num::NonZeroU32;
+use std::path::PathBuf;
+use std::rc::Rc;
+use std::time::{Duration, Instant};
+use winit::application::ApplicationHandler;
+use winit::dpi::{PhysicalPosition, PhysicalSize};
+use winit::event::{ElementState, MouseButton, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
+use winit::keyboard::{KeyCode, PhysicalKey};
+use winit::window::{Window, WindowId};
+
+/// What the window adds to a walk's settings.
+#[derive(Debug, Clone, Default)]
+pub struct WindowOptions {
+    /// Save the walk as a path (JSON keyframes) here when the window closes.
+    pub record: Option<PathBuf>,
+}
+
+/// Opens a window and walks where the user steers until the window is closed, Escape is pressed
+/// or `cfg.max_frames` frames are drawn. Starts at the first keyframe of `cfg.path`.
+pub fn run(cfg: &WalkConfig, opts: &WindowOptions) -> Result<WalkSummary> {
+    if let Some(out) = &cfg.out {
+        std::fs::create_dir_all(out.join("frames"))
+            .with_context(|| format!("creating {}", out.display()))?;
+    }
+    let session = Session::open(cfg)?;
+    let (eye, dir) = cfg.path.sample(0.0);
+    let nav = Navigator::new(eye, dir, cfg.max_speed, cfg.max_turn);
+    let event_loop = EventLoop::new().context("opening the display (is DISPLAY set?)")?;
+    let mut app = App {
+        cfg,
+        session: Some(session),
+        nav,
+        controls: Controls::default(),
+        recorder: Recorder::default(),
+        view: None,
+        started: Instant::now(),
+        last: Instant::now(),
+        next_frame: Instant::now(),
+        error: None,
+    };
+    event_loop
+        .run_app(&mut app)
+        .context("the window's event loop")?;
+    if let Some(e) = app.error.take() {
+        return Err(e);
+    }
+    if let Some(path) = &opts.record {
+        let json = serde_json::to_vec_pretty(&app.recorder.path())?;
+        std::fs::write(path, json).with_context(|| format!("writing {}", path.display()))?;
+        eprintln!("recorded the walk to {}", path.display());
+    }
+    app.session
+        .take()
+        .context("the session ended early")?
+        .finish()
+}
+
+/// The window and what shows the frames in it.
+struct View {
+    window: Rc<Window>,
+    surface: softbuffer::Surface<Rc<Window>, Rc<Window>>,
+    _context: softbuffer::Context<Rc<Window>>,
+}
+
+struct App<'a> {
+    cfg: &'a WalkConfig,
+    session: Option<Session<'a>>,
+    nav: Navigator,
+    controls: Controls,
+    recorder: Recorder,
+    view: Option<View>,
+    started: Instant,
+    last: Instant,
+    next_frame: Instant,
+    error: Option<anyhow::Error>,
+}
+
+impl App<'_> {
+    fn open(&mut self, el: &ActiveEventLoop) -> Result<()> {
+        let (w, h) = self.cfg.size;
+        let attrs = Window::default_attributes()
+            .with_title("Portico")
+            .with_inner_size(PhysicalSize::new(w, h))
+            .with_resizable(false);
+        let window = Rc::new(el.create_window(attrs).context("creating the window")?);
+        let context = softbuffer::Context::new(window.clone())
+            .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
+        let mut surface = softbuffer::Surface::new(&context, window.clone())
+            .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
+        let (nw, nh) = (NonZeroU32::new(w.max(1)), NonZeroU32::new(h.max(1)));
+        if let (Some(nw), Some(nh)) = (nw, nh) {
+            surface
+                .resize(nw, nh)
+                .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
+        }
+        self.view = Some(View {
+            window,
+            surface,
+            _context: context,
+        });
+        Ok(())
+    }
+
+    /// One frame: move the observer, draw, show. Returns the frames drawn so far.
+    fn draw(&mut self) -> Result<u64> {
+        let now = Instant::now();
+        let dt = now.duration_since(self.last).as_secs_f32().min(0.25);
+        self.last = now;
+        let velocity = self.nav.update(&self.controls, dt);
+        let t = now.duration_since(self.started).as_secs_f64();
+        self.recorder.note(t as f32, self.nav.eye, self.nav.dir());
+        let session = self.session.as_mut().context("no session")?;
+        let obs = session.observer(self.nav.eye, self.nav.dir(), velocity);
+        let frame = session.frame(t, &obs)?.frame;
+        if self.cfg.png_every > 0 && frame % self.cfg.png_every == 0 {
+            session.save_png(frame)?;
+        }
+        let img = session.image()?;
+        let view = self.view.as_mut().context("no window")?;
+        let mut buf = view
+            .surface
+            .buffer_mut()
+            .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
+        for (dst, p) in buf.iter_mut().zip(img.pixels()) {
+            *dst = u32::from(p[0]) << 16 | u32::from(p[1]) << 8 | u32::from(p[2]);
+        }
+        buf.present()
+            .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
+        Ok(frame + 1)
+    }
+
+    fn fail(&mut self, el: &ActiveEventLoop, e: anyhow::Error) {
+        self.error = Some(e);
+        el.exit();
+    }
+}
+
+impl ApplicationHandler for App<'_> {
+    fn resumed(&mut self, el: &ActiveEventLoop) {
+        if self.view.is_none()
+            && let Err(e) = self.open(el)
+        {
+            self.fail(el, e);
+        }
+    }
+
+    fn window_event(&mut self, el: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        match event {
+            WindowEvent::CloseRequested => el.exit(),
+            WindowEvent::RedrawRequested => match self.draw() {
+                Err(e) => self.fail(el, e),
+                // `--max-frames` ends an interactive walk too (handy for scripted runs).
+                Ok(frames) if self.cfg.max_frames.is_some_and(|m| frames >= m) => el.exit(),
+                Ok(_) => {}
+            },
+            WindowEvent::CursorMoved { position, .. } => self.cursor(position),
+            WindowEvent::MouseInput { state, button, .. } => {
+                let down = state == ElementState::Pressed;
+                match button {
+                    MouseButton::Left => self.controls.forward = down,
+                    MouseButton::Right => self.controls.backward = down,
+                    MouseButton::Middle => self.controls.spin = down,
+                    _ => {}
+                }
+            }
+            WindowEvent::ModifiersChanged(m) => self.controls.pitch = m.state().control_key(),
+            WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
+                let PhysicalKey::Code(code) = event.physical_key else {
+                    return;
+                };
+                if code == KeyCode::Escape {
+                    el.exit();
+                } else if let Some(step) = key_step(code) {
+                    self.nav.step(step);
+                }
+            }
+            _ => {}
+        }
+    }
+
+    fn about_to_wait(&mut self, el: &ActiveEventLoop) {
+        // One frame per budget: the same pace as a headless walk.
+        let now = Instant::now();
+        if now >= self.next_frame {
+            self.next_frame = now + Duration::from_secs_f64(self.cfg.budget_s.max(1e-3));
+            if let Some(v) = &self.view {
+                v.window.request_redraw();
+            }
+        }
+        el.set_control_flow(ControlFlow::WaitUntil(self.next_frame));
+    }
+}
+
+impl App<'_> {
+    fn cursor(&mut self, p: PhysicalPosition<f64>) {
+        let (w, h) = self.cfg.size;
+        self.controls.cursor = [
+            (p.x as f32 / w.max(1) as f32) * 2.0 - 1.0,
+            1.0 - (p.y as f32 / h.max(1) as f32) * 2.0,
+        ];
+    }
+}
+
+/// Funkhouser's arrow and keypad keys.
+fn key_step(code: KeyCode) -> Option<Step> {
+    Some(match code {
+        KeyCode::ArrowLeft => Step::SpinLeft,
+        KeyCode::ArrowRight => Step::SpinRight,
+        KeyCode::ArrowUp => Step::SpinUp,
+        KeyCode::ArrowDown => Step::SpinDown,
+        KeyCode::Numpad4 => Step::Left,
+        KeyCode::Numpad6 => Step::Right,
+        KeyCode::Numpad8 => Step::Up,
+        KeyCode::Numpad2 => Step::Down,
+        KeyCode::Numpad5 => Step::Forward,
+        KeyCode::NumpadDivide => Step::Back,
+        _ => return None,
+    })
+}
