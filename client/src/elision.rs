@@ -88,6 +88,10 @@ pub enum Algorithm {
     /// Cost/benefit optimisation within the frame budget (§4.2.3).
     #[default]
     Optimize,
+    /// Maciel's cluster traversal: far clusters as boxes, the rest as objects with their finest
+    /// resident LOD that fits ([`crate::cluster`]; the walk and bench drive it). As an object
+    /// elider on its own it is [`Algorithm::Optimize`].
+    Impostors,
 }
 
 impl Algorithm {
@@ -106,6 +110,7 @@ impl Algorithm {
             Algorithm::Static => "static",
             Algorithm::Feedback => "feedback",
             Algorithm::Optimize => "optimize",
+            Algorithm::Impostors => "impostors",
         }
     }
 }
@@ -131,6 +136,7 @@ impl FromStr for Algorithm {
             "static" => Ok(Algorithm::Static),
             "feedback" => Ok(Algorithm::Feedback),
             "optimize" | "optimise" => Ok(Algorithm::Optimize),
+            "impostors" => Ok(Algorithm::Impostors),
             _ => Err(ParseAlgorithmError(s.to_owned())),
         }
     }
@@ -402,7 +408,7 @@ impl Elider {
                 let t = self.threshold_px;
                 by_rule(cands, |c| static_lod(&c.lods, c.pixels, t))
             }
-            Algorithm::Optimize => self.optimize(cands, cost),
+            Algorithm::Optimize | Algorithm::Impostors => self.optimize(cands, cost),
         };
         let frame = self.summarise(cands, cost, choices);
         self.remember(cands, &frame.choices);

@@ -6,12 +6,13 @@
 //! bounded queue. The render stage never waits for it.
 
 use crate::net::Remote;
-use crate::render::{GpuMesh, Uploader};
+use crate::render::{GpuImpostor, GpuMesh, Uploader};
 use crate::schedule::{Ask, Event, Fetcher, Items, drive};
 use anyhow::bail;
 use portico_data::cells::StabList;
+use portico_data::geometry::Aabb;
 use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse, SegmentInfo};
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use tokio::sync::{mpsc, watch};
 
@@ -21,6 +22,8 @@ pub enum Payload {
     Mesh(GpuMesh),
     /// A decoded stab list.
     Stab(Arc<StabList>),
+    /// A cluster's textured box, on the GPU.
+    Impostor(GpuImpostor),
 }
 
 /// One message from the IO stage.
@@ -43,6 +46,8 @@ pub struct Catalogue {
     pub segments: Vec<SegmentInfo>,
     /// Ids of the stab-list segments.
     pub stabs: HashSet<u32>,
+    /// Texture segments: the box and atlas tile of the cluster each belongs to.
+    pub textures: HashMap<u32, (Aabb, u32)>,
 }
 
 /// The real client's [`Fetcher`]: HTTP, checksum, decode, GPU upload.
@@ -94,6 +99,13 @@ impl Http {
     /// again later), and turns the rest into cache entries.
     fn decode(&self, id: u32, bytes: &[u8]) -> anyhow::Result<Payload> {
         verify(self.catalogue.segments.get(id as usize), id, bytes)?;
+        if let Some((bounds, tile)) = self.catalogue.textures.get(&id) {
+            let imp = self
+                .uploader
+                .upload_impostor(bytes, bounds, *tile)
+                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
+            return Ok(Payload::Impostor(imp));
+        }
         if self.catalogue.stabs.contains(&id) {
             let list = portico_data::format::decode_segment::<StabList>(bytes)
                 .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;

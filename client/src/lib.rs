@@ -2,8 +2,10 @@
 
 pub mod bench;
 pub mod cache;
+pub mod cluster;
 pub mod cost;
 pub mod elision;
+pub mod impostor;
 pub mod io;
 pub mod loadtest;
 pub mod navigate;

@@ -6,11 +6,12 @@
 //! loop never waits for the network: what has not arrived is skipped and counted (§5.2.4).
 
 use crate::cache::ObjectCache;
+use crate::cluster::{self, Cut, Stand, Traversal};
 use crate::cost::{CostModel, OnlineCost};
 use crate::elision::{Algorithm, Elider};
 use crate::io::{Catalogue, IoConfig, IoStage, Payload};
 use crate::net::Remote;
-use crate::render::{Camera, Draw, GpuMesh, Renderer};
+use crate::render::{Camera, Draw, GpuImpostor, GpuMesh, Renderer};
 use crate::schedule::{Ask, Event};
 use crate::stats::{FrameRow, Series, write_csv};
 use crate::view;
@@ -20,6 +21,7 @@ use portico_data::cells::realtime::Frustum;
 use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::Header;
 use portico_data::geometry::{Mesh, Vertex, encode_geometry};
+use portico_data::hierarchy::{Hierarchy, colour_box};
 use portico_data::path::CameraPath;
 use portico_protocol::{Observer, Policy};
 use serde::Serialize;
@@ -130,6 +132,7 @@ pub struct WalkSummary {
 enum Resident {
     Mesh(GpuMesh),
     Stab(Arc<StabList>),
+    Impostor(GpuImpostor),
 }
 
 /// The model as the client knows it.
@@ -315,10 +318,19 @@ fn load_model(remote: &Remote) -> Result<Model> {
             .as_ref()
             .map(|c| c.stab_segments.iter().copied().collect())
             .unwrap_or_default();
+        let textures = m
+            .header
+            .hierarchy
+            .iter()
+            .flat_map(|h| &h.nodes)
+            .filter(|n| n.texture != u32::MAX)
+            .map(|n| (n.texture, (n.bounds, n.tile)))
+            .collect();
         Ok(Model {
             catalogue: Catalogue {
                 segments: m.segments,
                 stabs,
+                textures,
             },
             header: m.header,
             graph,
@@ -362,6 +374,8 @@ struct Walker<'a> {
     cost: CostModel,
     online: OnlineCost,
     consumed: u64,
+    traversal: Traversal,
+    colour_boxes: std::collections::HashMap<u32, GpuMesh>,
     latencies: Vec<f64>,
     failures: u64,
     segments_read: u64,
@@ -379,6 +393,8 @@ impl<'a> Walker<'a> {
             cost,
             online: OnlineCost::default(),
             consumed: 0,
+            traversal: Traversal::default(),
+            colour_boxes: std::collections::HashMap::new(),
             latencies: Vec::new(),
             failures: 0,
             segments_read: 0,
@@ -406,6 +422,7 @@ impl<'a> Walker<'a> {
                     let value = match body {
                         Payload::Mesh(m) => Resident::Mesh(m),
                         Payload::Stab(s) => Resident::Stab(s),
+                        Payload::Impostor(i) => Resident::Impostor(i),
                     };
                     if let Ok(released) = self.cache.insert(id, value, bytes) {
                         row.released_segments += released.len() as u32;
@@ -463,6 +480,7 @@ impl<'a> Walker<'a> {
         let t = Instant::now();
         let camera = self.camera(eye, dir);
         let vp = camera.view_proj(r.aspect());
+        let cache = &self.cache;
         let resident = |s: u32| matches!(cache.get(s), Some(Resident::Mesh(_)));
         let viewpoint = view::Viewpoint {
             view_proj: vp,
@@ -475,21 +493,44 @@ impl<'a> Walker<'a> {
         // Never want finer than the server's lookahead will ever send (§5.3's static cap).
         let dropped = view::cap_detail(&mut cands, self.cfg.policy.size_threshold_px);
         let model = self.online.apply(&self.cost);
-        let decided = self.elider.choose(&cands, &model, self.last_frame_s);
+        let (lods, boxes) = match (&self.model.header.hierarchy, self.cfg.elision) {
+            (Some(h), Algorithm::Impostors) => {
+                let f = Sight {
+                    h,
+                    cache,
+                    camera: &camera,
+                    viewpoint: &viewpoint,
+                    size: self.cfg.size,
+                };
+                let cut = f.traverse(&mut self.traversal, &cands, &model, self.cfg.budget_s);
+                row.predicted_s = cut.predicted_s;
+                row.objects_skipped = cut.objects_skipped;
+                row.lods_skipped = lods_short(&cands, &cut.lods);
+                (cut.lods, cut.boxes)
+            }
+            _ => {
+                let decided = self.elider.choose(&cands, &model, self.last_frame_s);
+                row.predicted_s = decided.predicted_s;
+                row.lods_skipped = decided.lods_skipped;
+                row.objects_skipped = decided.objects_skipped;
+                (decided.choices.iter().map(|c| c.lod).collect(), Vec::new())
+            }
+        };
         row.elision_s = t.elapsed().as_secs_f64();
-        row.predicted_s = decided.predicted_s;
-        row.lods_skipped = decided.lods_skipped;
-        row.objects_skipped = decided.objects_skipped;
 
+        if let Some(h) = &self.model.header.hierarchy {
+            make_colour_boxes(&mut self.colour_boxes, h, &boxes, r);
+        }
         let header = &self.model.header;
+        let cache = &self.cache;
         let mut draws = Vec::with_capacity(cands.len());
         let mut touched = Vec::new();
-        for ((c, choice), skip) in cands.iter().zip(&decided.choices).zip(&dropped) {
+        for ((c, lod), skip) in cands.iter().zip(&lods).zip(&dropped) {
             let inst = &header.instances[c.id as usize];
-            let lods = header.lods_of(inst);
-            touched.extend(lods.iter().map(|l| l.segment).filter(|&s| resident(s)));
-            let Some(l) = choice.lod else { continue };
-            if let Some(Resident::Mesh(mesh)) = cache.get(lods[l + skip].segment) {
+            let all = header.lods_of(inst);
+            touched.extend(all.iter().map(|l| l.segment).filter(|&s| resident(s)));
+            let Some(l) = lod else { continue };
+            if let Some(Resident::Mesh(mesh)) = cache.get(all[l + skip].segment) {
                 let color = header
                     .materials
                     .get(inst.material as usize)
@@ -501,7 +542,18 @@ impl<'a> Walker<'a> {
                 });
             }
         }
-        let timing = r.render(&camera, &draws)?;
+        let textured = match &header.hierarchy {
+            Some(h) => stand_ins(
+                cache,
+                &self.colour_boxes,
+                h,
+                &boxes,
+                &mut draws,
+                &mut touched,
+            ),
+            None => Vec::new(),
+        };
+        let timing = r.render_with_boxes(&camera, &draws, &textured)?;
         row.render_s = timing.total_s;
         row.drawn_objects = timing.draws;
         row.drawn_triangles = timing.triangles;
@@ -595,4 +647,109 @@ impl<'a> Walker<'a> {
         }
         Ok(s)
     }
+}
+
+/// LOD levels an object drawn by the cluster traversal gave up because finer ones were not
+/// resident (Funkhouser §5.2.4's count, for the traversal's choices).
+fn lods_short(cands: &[crate::elision::Candidate], lods: &[Option<usize>]) -> u32 {
+    cands
+        .iter()
+        .zip(lods)
+        .filter_map(|(c, l)| {
+            let l = (*l)?;
+            Some(c.lods[..l].iter().filter(|o| !o.resident).count() as u32)
+        })
+        .sum()
+}
+
+/// What the cluster traversal looks at in one frame.
+struct Sight<'a> {
+    h: &'a Hierarchy,
+    cache: &'a ObjectCache<Resident>,
+    camera: &'a Camera,
+    viewpoint: &'a view::Viewpoint,
+    size: (u32, u32),
+}
+
+impl Sight<'_> {
+    /// Maciel's traversal over the clusters for this frame's candidates.
+    fn traverse(
+        &self,
+        t: &mut Traversal,
+        cands: &[crate::elision::Candidate],
+        model: &CostModel,
+        budget_s: f64,
+    ) -> Cut {
+        let (h, (w, ht)) = (self.h, self.size);
+        let vp = self.viewpoint.view_proj;
+        let pixels = |n: u32| view::screen_pixels(&h.nodes[n as usize].bounds, &vp, w, ht);
+        let (eye, near) = (self.camera.eye, self.camera.near);
+        let inside = |n: u32| {
+            let b = &h.nodes[n as usize].bounds;
+            (0..3).all(|i| b.min[i] - near <= eye[i] && eye[i] <= b.max[i] + near)
+        };
+        let textured = |n: u32| {
+            let s = h.nodes[n as usize].texture;
+            s != u32::MAX && matches!(self.cache.get(s), Some(Resident::Impostor(_)))
+        };
+        let f = cluster::Frame {
+            pixels: &pixels,
+            eye_inside: &inside,
+            textured: &textured,
+            cost: model,
+            budget_s,
+        };
+        t.choose(h, cands, &f)
+    }
+}
+
+/// Makes the average-colour boxes of `boxes` that do not exist yet (their colours are in the
+/// header: nothing to fetch).
+fn make_colour_boxes(
+    made: &mut std::collections::HashMap<u32, GpuMesh>,
+    h: &Hierarchy,
+    boxes: &[(u32, Stand)],
+    r: &Renderer,
+) {
+    for &(n, _) in boxes {
+        if let std::collections::hash_map::Entry::Vacant(e) = made.entry(n) {
+            let node = &h.nodes[n as usize];
+            let mesh = encode_geometry(&colour_box(&node.bounds, &node.face_colors));
+            if let Ok(gpu) = r.upload(&mesh) {
+                e.insert(gpu);
+            }
+        }
+    }
+}
+
+/// Adds the average-colour boxes to `draws` and returns the resident textured boxes; the
+/// textures used count as touched (§5.2.3).
+fn stand_ins<'c>(
+    cache: &'c ObjectCache<Resident>,
+    colour: &'c std::collections::HashMap<u32, GpuMesh>,
+    h: &Hierarchy,
+    boxes: &[(u32, Stand)],
+    draws: &mut Vec<Draw<'c>>,
+    touched: &mut Vec<u32>,
+) -> Vec<&'c GpuImpostor> {
+    let mut textured = Vec::new();
+    for &(n, stand) in boxes {
+        let t = h.nodes[n as usize].texture;
+        match (stand, cache.get(t)) {
+            (Stand::Textured, Some(Resident::Impostor(i))) => {
+                touched.push(t);
+                textured.push(i);
+            }
+            _ => {
+                if let Some(mesh) = colour.get(&n) {
+                    draws.push(Draw {
+                        mesh,
+                        transform: Mat4::IDENTITY,
+                        color: [1.0; 4],
+                    });
+                }
+            }
+        }
+    }
+    textured
 }

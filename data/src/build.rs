@@ -13,6 +13,7 @@ use crate::format::{
     CellIndex, Header, InstanceRecord, LodRecord, ObjectRecord, SegmentKind, encode_segment,
 };
 use crate::geometry::{Aabb, encode_geometry};
+use crate::hierarchy::{self, Hierarchy, ImpostorPainter, PaintItem};
 use crate::lod::{LodMesh, complete_lods};
 use crate::model::{Instance, Model};
 use glam::Mat4;
@@ -33,6 +34,8 @@ pub struct BuildOptions {
     pub name: Option<String>,
     /// Skip the cell subdivision and visibility precomputation.
     pub no_cells: bool,
+    /// Skip the model hierarchy of clusters and its impostors.
+    pub no_hierarchy: bool,
 }
 
 /// Receives progress from long build steps (the CLI draws progress bars with it).
@@ -62,14 +65,29 @@ pub struct BuildReport {
     pub subdivision_seconds: f64,
     /// Seconds spent on the visibility precomputation (0 without cells).
     pub visibility_seconds: f64,
+    /// Seconds spent clustering and painting impostors.
+    pub hierarchy_seconds: f64,
 }
 
-/// Builds a display database at `out` from an imported model.
+/// Builds a display database at `out` from an imported model, with average-colour boxes but
+/// no textured impostors (see [`build_with`]).
 pub fn build(
     model: Model,
     out: &Path,
     opts: &BuildOptions,
     obs: &dyn Observer,
+) -> Result<BuildReport> {
+    build_with(model, out, opts, obs, None)
+}
+
+/// Builds a display database at `out` from an imported model; `painter` renders the clusters'
+/// textured boxes (Maciel §5.2.2).
+pub fn build_with(
+    model: Model,
+    out: &Path,
+    opts: &BuildOptions,
+    obs: &dyn Observer,
+    painter: Option<&mut dyn ImpostorPainter>,
 ) -> Result<BuildReport> {
     let t0 = Instant::now();
     let Model {
@@ -111,6 +129,19 @@ pub fn build(
             .collect()
     };
     let bounds = records.iter().fold(Aabb::EMPTY, |b, r| b.union(&r.bounds));
+    let t_h = Instant::now();
+    let hierarchy = if opts.no_hierarchy {
+        None
+    } else {
+        let scene = Scene {
+            records: &records,
+            lods: &lods,
+            instances: &instances,
+            materials: &materials,
+        };
+        Some(write_hierarchy(&mut w, &scene, painter, obs)?)
+    };
+    let hierarchy_seconds = t_h.elapsed().as_secs_f64();
     let mut times = (0.0, 0.0);
     let cells = match &occluders {
         Some(occ) => Some(write_cells(
@@ -134,6 +165,7 @@ pub fn build(
         objects,
         instances: records,
         cells,
+        hierarchy,
     };
     let written = w.finish(&header)?;
     Ok(BuildReport {
@@ -143,7 +175,106 @@ pub fn build(
         cells: cell_stats,
         subdivision_seconds: times.0,
         visibility_seconds: times.1,
+        hierarchy_seconds,
     })
+}
+
+/// What the hierarchy build needs to see of the model.
+struct Scene<'a> {
+    records: &'a [InstanceRecord],
+    lods: &'a [(String, u32, Vec<LodMesh>)],
+    instances: &'a [Instance],
+    materials: &'a [crate::model::Material],
+}
+
+/// Clusters the instances (Maciel §6.3.2) and paints each cluster's impostors from the real
+/// objects beneath it; writes the textured boxes' atlases as texture segments.
+fn write_hierarchy(
+    w: &mut DbWriter,
+    scene: &Scene<'_>,
+    mut painter: Option<&mut dyn ImpostorPainter>,
+    obs: &dyn Observer,
+) -> Result<Hierarchy> {
+    let bounds: Vec<Aabb> = scene.records.iter().map(|r| r.bounds).collect();
+    let mut h = Hierarchy::build(&bounds, hierarchy::FIRST_CELL);
+    obs.stage("impostors", h.nodes.len() as u64);
+    for n in 0..h.nodes.len() {
+        let under = h.instances_under(n as u32);
+        let node_bounds = h.nodes[n].bounds;
+        let textured = hierarchy::tile_for(&node_bounds);
+        let colors = match painter.as_deref_mut() {
+            Some(p) => {
+                let tile = textured.max(hierarchy::TILE_RANGE.0);
+                let items = paint_items(scene, &under, &node_bounds, tile);
+                let (png, colors) = p
+                    .paint(&items, &node_bounds, tile)
+                    .map_err(crate::DataError::Impostor)?;
+                if textured > 0 {
+                    h.nodes[n].texture = w.add_segment(SegmentKind::Texture, &png)?;
+                    h.nodes[n].tile = tile;
+                }
+                colors
+            }
+            None => material_colors(scene, &under),
+        };
+        h.nodes[n].face_colors = colors;
+        obs.advance(1);
+    }
+    Ok(h)
+}
+
+/// The objects under a cluster, each at the coarsest LOD that still shows its shape at the
+/// tile's texel size (about 16 texels per triangle, as the static size threshold).
+fn paint_items<'a>(
+    scene: &Scene<'a>,
+    under: &[u32],
+    bounds: &Aabb,
+    tile: u32,
+) -> Vec<PaintItem<'a>> {
+    let texel = bounds.size().max_element().max(1e-3) / tile.max(1) as f32;
+    under
+        .iter()
+        .filter_map(|&i| {
+            let inst = scene.instances.get(i as usize)?;
+            let levels = &scene.lods.get(inst.def as usize)?.2;
+            let px = scene.records[i as usize].bounds.size().max_element() / texel;
+            let lod = levels
+                .iter()
+                .position(|l| px * px / l.mesh.triangle_count().max(1) as f32 >= 16.0)
+                .unwrap_or(levels.len().saturating_sub(1));
+            let mesh = &levels.get(lod)?.mesh;
+            let color = scene
+                .materials
+                .get(inst.material as usize)
+                .map_or([1.0; 4], |m| m.base_color);
+            Some(PaintItem {
+                key: (inst.def, lod as u32),
+                mesh,
+                transform: inst.transform,
+                color,
+            })
+        })
+        .collect()
+}
+
+/// Face colours without a painter: the area-weighted mean of the materials beneath.
+fn material_colors(scene: &Scene<'_>, under: &[u32]) -> [[f32; 4]; 6] {
+    let mut sum = [0.0f32; 4];
+    for &i in under {
+        let r = &scene.records[i as usize];
+        let s = r.bounds.size();
+        let area = s.x * s.y + s.y * s.z + s.x * s.z;
+        let c = scene
+            .materials
+            .get(r.material as usize)
+            .map_or([1.0; 4], |m| m.base_color);
+        for k in 0..3 {
+            sum[k] += c[k] * area;
+        }
+        sum[3] += area;
+    }
+    let w = sum[3].max(1e-9);
+    [[sum[0] / w, sum[1] / w, sum[2] / w, 1.0]; 6]
 }
 
 /// Subdivides into cells, precomputes visibility (Funkhouser §3.2) and writes the cell graph,

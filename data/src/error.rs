@@ -59,6 +59,9 @@ pub enum DataError {
     /// A caller asked for something that does not exist (e.g. a segment id out of range).
     #[error("{0}")]
     NotFound(String),
+    /// The impostor painter (the renderer used at build time) failed.
+    #[error("painting impostors: {0}")]
+    Impostor(String),
 }
 
 impl DataError {

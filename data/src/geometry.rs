@@ -84,6 +84,11 @@ impl Aabb {
         }
     }
 
+    /// Whether `other` lies inside this box (faces may touch).
+    pub fn contains_box(&self, other: &Aabb) -> bool {
+        (0..3).all(|i| self.min[i] <= other.min[i] && other.max[i] <= self.max[i])
+    }
+
     /// Extent along each axis (zero for an empty box).
     pub fn size(&self) -> Vec3 {
         if self.is_empty() {

@@ -12,6 +12,7 @@ pub mod cells;
 pub mod error;
 pub mod format;
 pub mod geometry;
+pub mod hierarchy;
 pub mod import;
 pub mod lod;
 pub mod model;

@@ -60,6 +60,14 @@ pub struct DbStats {
     pub portals: u64,
     /// Funkhouser Table 3.2 and precomputation times, when the database has cells.
     pub cell_stats: Option<crate::cells::CellStats>,
+    /// Clusters of the model hierarchy (Maciel §6.3; 0 without one).
+    pub clusters: u64,
+    /// Clusters with a textured box.
+    pub textured_clusters: u64,
+    /// Depth of the hierarchy (clusters from the root down to the deepest leaf).
+    pub hierarchy_depth: u64,
+    /// Bytes of texture segments (the textured boxes' atlases).
+    pub texture_bytes: u64,
 }
 
 /// Computes the statistics of an open database (header only; no segment is read).
@@ -105,7 +113,32 @@ pub fn stats(db: &Database) -> DbStats {
         .filter(|s| s.kind == SegmentKind::Geometry as u16)
         .map(|s| s.length)
         .sum();
+    let kind_bytes = |k: SegmentKind| -> u64 {
+        db.segments()
+            .iter()
+            .filter(|s| s.kind == k as u16)
+            .map(|s| s.length)
+            .sum()
+    };
+    let (clusters, textured_clusters, hierarchy_depth) =
+        h.hierarchy.as_ref().map_or((0, 0, 0), |hy| {
+            let textured = hy.nodes.iter().filter(|n| n.texture != u32::MAX).count() as u64;
+            let mut depth = vec![0u64; hy.nodes.len()];
+            for i in (0..hy.nodes.len()).rev() {
+                let p = hy.nodes[i].parent as usize;
+                depth[i] = if p < hy.nodes.len() { depth[p] + 1 } else { 1 };
+            }
+            (
+                hy.nodes.len() as u64,
+                textured,
+                depth.into_iter().max().unwrap_or(0),
+            )
+        });
     DbStats {
+        clusters,
+        textured_clusters,
+        hierarchy_depth,
+        texture_bytes: kind_bytes(SegmentKind::Texture),
         name: h.name.clone(),
         format_version: db.prologue().version,
         flattened: h.flattened,
@@ -203,6 +236,15 @@ impl DbStats {
             ] {
                 s.push_str(&format!("  {name:<28} {mean:>10.2} {max:>8}\n"));
             }
+        }
+        if self.clusters > 0 {
+            s.push_str(&format!(
+                "\n  clusters {} ({} with textured boxes, {:.1} MB of atlases), depth {}\n",
+                self.clusters,
+                self.textured_clusters,
+                self.texture_bytes as f64 / 1e6,
+                self.hierarchy_depth
+            ));
         }
         s
     }

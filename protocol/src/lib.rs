@@ -11,7 +11,7 @@ pub use messages::*;
 use serde::{Serialize, de::DeserializeOwned};
 
 /// Version of the wire types in this crate.
-pub const PROTOCOL_VERSION: u32 = 1;
+pub const PROTOCOL_VERSION: u32 = 2;
 
 /// `Content-Type` of bincode bodies.
 pub const BINCODE_MIME: &str = "application/x-portico-bincode";

@@ -156,6 +156,8 @@ pub enum NeedKind {
     Stab,
     /// One LOD of an object's geometry.
     Geometry,
+    /// A cluster's impostor texture (its textured box).
+    Texture,
 }
 
 /// One entry of the lookahead list.

@@ -2,7 +2,9 @@
 
 use crate::progress::Bars;
 use anyhow::{Context, Result};
-use portico_data::build::{BuildOptions, build};
+use portico_client::impostor::Painter;
+use portico_data::build::{BuildOptions, build_with};
+use portico_data::hierarchy::ImpostorPainter;
 use portico_data::import::import_file;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -28,6 +30,13 @@ pub struct Args {
     /// Skip the cells, portals and visibility precomputation.
     #[arg(long)]
     no_cells: bool,
+    /// Skip the hierarchy of clusters and its impostors.
+    #[arg(long)]
+    no_hierarchy: bool,
+    /// Cluster the model but paint no textured boxes (average-colour boxes only; no renderer
+    /// needed at build time).
+    #[arg(long)]
+    no_textures: bool,
 }
 
 /// Imports the models, builds, and prints a one-line summary.
@@ -49,8 +58,16 @@ pub fn run(a: Args) -> Result<()> {
         flatten: a.flatten,
         name: a.name,
         no_cells: a.no_cells,
+        no_hierarchy: a.no_hierarchy,
     };
-    let report = build(model, &a.output, &opts, &bars)?;
+    let mut painter = painter(a.no_hierarchy || a.no_textures);
+    let report = build_with(
+        model,
+        &a.output,
+        &opts,
+        &bars,
+        painter.as_mut().map(|p| p as &mut dyn ImpostorPainter),
+    )?;
     bars.finish();
     eprintln!(
         "wrote {} ({:.1} MB, {} segments) in {:.2} s (import {:.2} s, LODs {:.2} s, write {:.2} s)",
@@ -62,6 +79,17 @@ pub fn run(a: Args) -> Result<()> {
         report.lod_time.as_secs_f64(),
         report.write_time.as_secs_f64(),
     );
+    if !a.no_hierarchy {
+        eprintln!(
+            "impostors: {} in {:.2} s",
+            if painter.is_some() {
+                "clusters with textured and average-colour boxes"
+            } else {
+                "clusters with average-colour boxes only"
+            },
+            report.hierarchy_seconds
+        );
+    }
     if let Some(c) = &report.cells {
         eprintln!(
             "cells: {} ({} live), {} portals from {} occluder faces; subdivision {:.2} s, visibility {:.2} s{}",
@@ -79,4 +107,21 @@ pub fn run(a: Args) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The impostor painter, unless not wanted; a machine without any graphics adapter builds with
+/// average-colour boxes only, and says so.
+fn painter(skip: bool) -> Option<Painter> {
+    if skip {
+        return None;
+    }
+    match Painter::new() {
+        Ok(p) => Some(p),
+        Err(e) => {
+            eprintln!(
+                "warning: no renderer for textured impostors ({e}); average-colour boxes only"
+            );
+            None
+        }
+    }
 }

@@ -14,7 +14,7 @@ use portico_client::policy::policy_spec;
 use portico_client::render::Renderer;
 use portico_client::walk::{WalkConfig, WalkSummary, walk};
 use portico_data::Database;
-use portico_data::build::{BuildOptions, build};
+use portico_data::build::{BuildOptions, build_with};
 use portico_data::import::import_file;
 use portico_data::path::{CameraPath, PathKind, generate};
 use portico_generator::{Params, Preset};
@@ -142,7 +142,16 @@ fn generate_building(a: &Args, glb: &Path) -> Result<()> {
 
 fn build_database(glb: &Path, db: &Path) -> Result<()> {
     let bars = Bars::new();
-    let r = build(import_file(glb)?, db, &BuildOptions::default(), &bars)?;
+    let mut painter = portico_client::impostor::Painter::new().ok();
+    let r = build_with(
+        import_file(glb)?,
+        db,
+        &BuildOptions::default(),
+        &bars,
+        painter
+            .as_mut()
+            .map(|p| p as &mut dyn portico_data::hierarchy::ImpostorPainter),
+    )?;
     bars.finish();
     eprintln!(
         "{} ({:.1} MB)",

@@ -52,8 +52,10 @@ pub mod plot;
 pub mod report;
 pub mod scene;
 
+use crate::cluster::{self, Stand, Traversal};
 use crate::cost::{CostModel, OnlineCost};
 use crate::elision::{Algorithm, Elider};
+use crate::render::GpuImpostor;
 use crate::render::{Camera, Draw, Renderer};
 use crate::stats::Series;
 use crate::view;
@@ -85,6 +87,9 @@ pub enum RunKind {
     Elision(Algorithm),
     /// The coarsest LOD of every visible object (a fidelity lower bound).
     Coarsest,
+    /// Maciel's cluster traversal with the frame budget: far clusters as textured or
+    /// average-colour boxes, the rest as objects ([`crate::cluster`]).
+    Impostors,
 }
 
 impl RunKind {
@@ -103,6 +108,7 @@ impl RunKind {
             RunKind::Regular => "regular",
             RunKind::Elision(a) => a.name(),
             RunKind::Coarsest => "coarsest",
+            RunKind::Impostors => "impostors",
         }
     }
 
@@ -123,7 +129,9 @@ impl fmt::Display for RunKind {
 
 /// An unknown run name.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown run `{0}` (expected regular, none, static, feedback, optimize or coarsest)")]
+#[error(
+    "unknown run `{0}` (expected regular, none, static, feedback, optimize, impostors or coarsest)"
+)]
 pub struct ParseRunError(pub String);
 
 impl FromStr for RunKind {
@@ -134,6 +142,7 @@ impl FromStr for RunKind {
         match s.trim().to_ascii_lowercase().as_str() {
             "regular" => Ok(RunKind::Regular),
             "coarsest" => Ok(RunKind::Coarsest),
+            "impostors" => Ok(RunKind::Impostors),
             other => other
                 .parse::<Algorithm>()
                 .map(RunKind::Elision)
@@ -485,6 +494,10 @@ fn calibrate(r: &mut Renderer) -> Result<CostModel> {
     Ok(CostModel::calibrate(&geometry, &fill))
 }
 
+/// A run's choice for one frame: `(instance, lod)` pairs to draw, clusters drawn as boxes, and
+/// the predicted render time.
+type Chosen = (Vec<(u32, usize)>, Vec<(u32, Stand)>, f64);
+
 /// Where frame `i` is seen from.
 struct FrameView {
     frame: u64,
@@ -498,6 +511,7 @@ struct FrameView {
 struct Run {
     kind: RunKind,
     elider: Option<Elider>,
+    traversal: Traversal,
     online: OnlineCost,
     last_frame_s: Option<f64>,
     fidelity: FidelityAccumulator,
@@ -524,6 +538,7 @@ impl<'a> Bench<'a> {
                     RunKind::Elision(a) => Some(Elider::new(a, cfg.budget_s)),
                     _ => None,
                 },
+                traversal: Traversal::default(),
                 online: OnlineCost::default(),
                 last_frame_s: None,
                 fidelity: FidelityAccumulator::new(cfg.patch_px),
@@ -629,14 +644,15 @@ impl<'a> Bench<'a> {
         let vis = self.visible(v);
         let visibility_s = t0.elapsed().as_secs_f64();
         let t1 = Instant::now();
-        let (drawn, predicted_s) = self.choose(k, &vis.objects, v);
+        let (drawn, boxes, predicted_s) = self.choose(k, &vis.objects, v);
         let elision_s = t1.elapsed().as_secs_f64();
-        let draws = self.draws(&drawn);
-        let timing = r.render(&v.camera, &draws)?;
+        let mut draws = self.draws(&drawn);
+        let textured = self.boxes(&boxes, &mut draws);
+        let timing = r.render_with_boxes(&v.camera, &draws, &textured)?;
         let frame_s = t0.elapsed().as_secs_f64();
         let run = &mut self.runs[k];
         run.last_frame_s = Some(frame_s);
-        if run.elider.is_some() {
+        if run.elider.is_some() || run.kind == RunKind::Impostors {
             run.online.observe(predicted_s, timing.total_s);
         }
         let row = FrameRecord {
@@ -655,22 +671,54 @@ impl<'a> Bench<'a> {
         Ok((row, drawn))
     }
 
-    /// The `(instance, lod)` pairs run `k` draws for `objects`, and the predicted render time.
-    fn choose(&mut self, k: usize, objects: &[u32], v: &FrameView) -> (Vec<(u32, usize)>, f64) {
+    /// The `(instance, lod)` pairs run `k` draws for `objects`, the clusters it draws as boxes,
+    /// and the predicted render time.
+    fn choose(&mut self, k: usize, objects: &[u32], v: &FrameView) -> Chosen {
         let scene = self.scene;
         let with_lods = objects.iter().copied().filter(|&o| scene.lod_count(o) > 0);
         let run = &mut self.runs[k];
         match run.kind {
-            RunKind::Regular => (with_lods.map(|o| (o, 0)).collect(), 0.0),
+            RunKind::Regular => (with_lods.map(|o| (o, 0)).collect(), Vec::new(), 0.0),
             RunKind::Coarsest => (
                 with_lods.map(|o| (o, scene.lod_count(o) - 1)).collect(),
+                Vec::new(),
                 0.0,
             ),
+            RunKind::Impostors => {
+                let cands = view::candidates(&scene.header, objects, &v.viewpoint, &|_| true);
+                let model = run.online.apply(&self.cost);
+                let Some(h) = &scene.header.hierarchy else {
+                    let all = cands.iter().map(|c| (c.id, 0)).collect();
+                    return (all, Vec::new(), 0.0);
+                };
+                let (w, hgt) = self.cfg.size;
+                let pixels = |n: u32| {
+                    view::screen_pixels(&h.nodes[n as usize].bounds, &v.viewpoint.view_proj, w, hgt)
+                };
+                let eye = v.camera.eye;
+                let inside = |n: u32| contains(&h.nodes[n as usize].bounds, eye, NEAR);
+                let textured = |n: u32| scene.textured.contains_key(&n);
+                let f = cluster::Frame {
+                    pixels: &pixels,
+                    eye_inside: &inside,
+                    textured: &textured,
+                    cost: &model,
+                    budget_s: self.cfg.budget_s,
+                };
+                let cut = run.traversal.choose(h, &cands, &f);
+                let mut drawn: Vec<(u32, usize)> = cands
+                    .iter()
+                    .zip(&cut.lods)
+                    .filter_map(|(c, l)| l.map(|l| (c.id, l)))
+                    .collect();
+                drawn.sort_unstable();
+                (drawn, cut.boxes, cut.predicted_s)
+            }
             RunKind::Elision(_) => {
                 let cands = view::candidates(&scene.header, objects, &v.viewpoint, &|_| true);
                 let model = run.online.apply(&self.cost);
                 let Some(elider) = run.elider.as_mut() else {
-                    return (Vec::new(), 0.0);
+                    return (Vec::new(), Vec::new(), 0.0);
                 };
                 let frame = elider.choose(&cands, &model, run.last_frame_s);
                 let mut drawn: Vec<(u32, usize)> = cands
@@ -679,9 +727,30 @@ impl<'a> Bench<'a> {
                     .filter_map(|(c, ch)| ch.lod.map(|l| (c.id, l)))
                     .collect();
                 drawn.sort_unstable();
-                (drawn, frame.predicted_s)
+                (drawn, Vec::new(), frame.predicted_s)
             }
         }
+    }
+
+    /// Adds the average-colour boxes to `draws`; returns the textured boxes.
+    fn boxes(&self, boxes: &[(u32, Stand)], draws: &mut Vec<Draw<'a>>) -> Vec<&'a GpuImpostor> {
+        let scene = self.scene;
+        let mut textured = Vec::new();
+        for &(n, stand) in boxes {
+            match (stand, scene.textured.get(&n)) {
+                (Stand::Textured, Some(t)) => textured.push(t),
+                _ => {
+                    if let Some(mesh) = scene.colour_boxes.get(n as usize) {
+                        draws.push(Draw {
+                            mesh,
+                            transform: Mat4::IDENTITY,
+                            color: [1.0; 4],
+                        });
+                    }
+                }
+            }
+        }
+        textured
     }
 
     fn draws(&self, drawn: &[(u32, usize)]) -> Vec<Draw<'a>> {
@@ -844,7 +913,7 @@ fn summarise_run(run: &Run, budget_s: f64, regular_polys: f64, total_critical: u
     RunSummary {
         name: run.kind.name().to_owned(),
         budget: budget_s,
-        budgeted: matches!(run.kind, RunKind::Elision(_)),
+        budgeted: matches!(run.kind, RunKind::Elision(_) | RunKind::Impostors),
         frames: rows.len() as u64,
         frame_time: series_of(rows, |x| x.frame_s),
         render_time: series_of(rows, |x| x.render_s),
@@ -894,6 +963,11 @@ fn machine() -> Machine {
         cores: std::thread::available_parallelism().map_or(1, |n| n.get()),
         os: format!("{} {}", std::env::consts::OS, std::env::consts::ARCH),
     }
+}
+
+/// Whether `p` lies inside `b` grown by `margin` (a box around the eye cannot stand in).
+fn contains(b: &portico_data::geometry::Aabb, p: Vec3, margin: f32) -> bool {
+    (0..3).all(|i| b.min[i] - margin <= p[i] && p[i] <= b.max[i] + margin)
 }
 
 #[cfg(test)]

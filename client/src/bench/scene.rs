@@ -4,13 +4,14 @@
 //! segment (object definitions are shared by their instances, which only transform them).
 
 use super::critical::{CriticalCounts, CriticalParams, CriticalSet, critical_vertices};
-use crate::render::{GpuMesh, Renderer};
+use crate::render::{GpuImpostor, GpuMesh, Renderer};
 use anyhow::{Context, Result};
 use glam::{Mat4, Vec3};
 use portico_data::Database;
 use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::{Header, LodRecord};
-use portico_data::geometry::{Aabb, GeometryView};
+use portico_data::geometry::{Aabb, GeometryView, encode_geometry};
+use portico_data::hierarchy::colour_box;
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::path::Path;
@@ -55,6 +56,10 @@ pub struct Scene {
     pub model_triangles: u64,
     /// GPU bytes of all uploaded segments.
     pub gpu_bytes: u64,
+    /// Each cluster's average-colour box (Maciel §5.2), by cluster id.
+    pub colour_boxes: Vec<GpuMesh>,
+    /// Each cluster's textured box, where it has one.
+    pub textured: HashMap<u32, GpuImpostor>,
 }
 
 impl Scene {
@@ -93,8 +98,11 @@ impl Scene {
             cv_counts: CriticalCounts::default(),
             model_triangles: 0,
             gpu_bytes: 0,
+            colour_boxes: Vec::new(),
+            textured: HashMap::new(),
         };
         scene.load_geometry(&db, renderer, params)?;
+        scene.load_clusters(&db, renderer)?;
         Ok(scene)
     }
 
@@ -135,6 +143,26 @@ impl Scene {
             next_cv += set.vertices.len() as u64;
         }
         u32::try_from(next_cv).context("more than 2³² critical vertices")?;
+        Ok(())
+    }
+
+    /// Uploads every cluster's average-colour box and textured box.
+    fn load_clusters(&mut self, db: &Database, renderer: &Renderer) -> Result<()> {
+        let Some(h) = &self.header.hierarchy else {
+            return Ok(());
+        };
+        for (id, n) in h.nodes.iter().enumerate() {
+            let mesh = encode_geometry(&colour_box(&n.bounds, &n.face_colors));
+            self.colour_boxes.push(renderer.upload(&mesh)?);
+            if n.texture != u32::MAX {
+                let png = db.segment(n.texture)?;
+                let imp = renderer
+                    .upload_impostor(&png, &n.bounds, n.tile)
+                    .with_context(|| format!("cluster {id}'s textured box"))?;
+                self.gpu_bytes += imp.gpu_bytes();
+                self.textured.insert(id as u32, imp);
+            }
+        }
         Ok(())
     }
 

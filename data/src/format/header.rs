@@ -25,6 +25,8 @@ pub struct Header {
     pub instances: Vec<InstanceRecord>,
     /// Cells, portals and precomputed visibility, when built.
     pub cells: Option<CellIndex>,
+    /// The model hierarchy of clusters with their impostors (Maciel §6.3), when built.
+    pub hierarchy: Option<crate::hierarchy::Hierarchy>,
 }
 
 /// Where the cell data lives (Funkhouser Fig. 3.23: cells, portals, stab lists).
@@ -157,6 +159,22 @@ impl Header {
             kind(c.occluder_segment, SegmentKind::Occluders, "occluders")?;
             for &s in c.stab_segments.iter().filter(|&&s| s != u32::MAX) {
                 kind(s, SegmentKind::StabList, "stab list")?;
+            }
+        }
+        if let Some(h) = &self.hierarchy {
+            let bounds: Vec<crate::geometry::Aabb> =
+                self.instances.iter().map(|i| i.bounds).collect();
+            h.check(&bounds).map_err(|e| format!("hierarchy: {e}"))?;
+            for (n, c) in h.nodes.iter().enumerate() {
+                if c.texture == u32::MAX {
+                    continue;
+                }
+                let seg = segments.get(c.texture as usize).ok_or_else(|| {
+                    format!("cluster {n} refers to missing segment {}", c.texture)
+                })?;
+                if SegmentKind::from_u16(seg.kind) != Some(SegmentKind::Texture) {
+                    return Err(format!("cluster {n}'s texture segment has the wrong kind"));
+                }
             }
         }
         for (i, inst) in self.instances.iter().enumerate() {

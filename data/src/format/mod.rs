@@ -25,7 +25,7 @@ use bytemuck::{Pod, Zeroable};
 /// First eight bytes of every display database.
 pub const MAGIC: [u8; 8] = *b"PORTICO\0";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// Size of the prologue; the first segment starts here.
 pub const PROLOGUE_SIZE: usize = 128;
 /// Minimum alignment of every segment.
@@ -45,7 +45,7 @@ pub enum SegmentKind {
     CellGraph = 2,
     /// One cell's stab list (reserved for the visibility precomputation).
     StabList = 3,
-    /// A texture (reserved).
+    /// A texture: a cluster's impostor atlas, PNG-encoded (see [`crate::hierarchy`]).
     Texture = 4,
     /// The occluder faces the cells were built from (used by `portico verify`).
     Occluders = 5,

@@ -47,6 +47,8 @@ impl std::fmt::Debug for Prefetcher {
 struct Candidate {
     /// The object is in the observer's view right now (eye-to-object visibility).
     now: bool,
+    /// The instance.
+    object: u32,
     level: u32,
     frames: u32,
     seq: u32,
@@ -185,7 +187,39 @@ impl Prefetcher {
                 }
             }
         }
+        let stab_items = self.with_textures(stab_items, &cands);
         Ok((ranged.len() as u32, stab_items, cands, lookahead_cells))
+    }
+
+    /// Appends the textured boxes of the clusters above the lookahead objects (the objects in
+    /// view first, then by frames until visible): a cluster's impostor comes before any
+    /// object's geometry, so the coarse view of a whole wing arrives before its furniture
+    /// (DESIGN §6).
+    fn with_textures(&self, mut items: Vec<NeedItem>, cands: &[Candidate]) -> Vec<NeedItem> {
+        let Some(h) = &self.db.header().hierarchy else {
+            return items;
+        };
+        let mut order: Vec<&Candidate> = cands.iter().filter(|c| c.level == 0).collect();
+        order.sort_by_key(|c| (!c.now, c.frames, c.seq));
+        let mut seen = HashSet::new();
+        for c in order {
+            let mut node = h
+                .instance_parent
+                .get(c.object as usize)
+                .copied()
+                .unwrap_or(u32::MAX);
+            while let Some(n) = h.nodes.get(node as usize) {
+                if !seen.insert(node) {
+                    break;
+                }
+                if n.texture != u32::MAX {
+                    let bytes = self.segment_bytes(n.texture);
+                    items.push(need(n.texture, NeedKind::Texture, 0, bytes, c.frames));
+                }
+                node = n.parent;
+            }
+        }
+        items
     }
 
     /// The objects in the observer's view right now: eye-to-object visibility from the eye
@@ -270,6 +304,7 @@ impl Prefetcher {
             bytes += b;
             cands.push(Candidate {
                 now: false,
+                object: o,
                 level: (lods.len() - 1 - i) as u32,
                 frames,
                 seq: cands.len() as u32,

@@ -18,7 +18,11 @@
 //! It runs on any wgpu adapter, including CPU ones (llvmpipe through GL, lavapipe through
 //! Vulkan); `WGPU_BACKEND` / `WGPU_ADAPTER_NAME` pick one.
 
-use std::sync::mpsc;
+pub mod textured;
+
+pub use textured::GpuImpostor;
+
+use std::sync::{Arc, mpsc};
 use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
@@ -127,12 +131,27 @@ impl GpuMesh {
 #[derive(Debug, Clone)]
 pub struct Uploader {
     device: wgpu::Device,
+    queue: wgpu::Queue,
+    textured: Arc<textured::Textured>,
 }
 
 impl Uploader {
     /// Same as [`Renderer::upload`].
     pub fn upload(&self, segment_bytes: &[u8]) -> Result<GpuMesh, RenderError> {
         upload_segment(&self.device, segment_bytes)
+    }
+
+    /// Same as [`Renderer::upload_impostor`].
+    pub fn upload_impostor(
+        &self,
+        png: &[u8],
+        bounds: &Aabb,
+        tile: u32,
+    ) -> Result<GpuImpostor, RenderError> {
+        scoped(&self.device, || {
+            self.textured
+                .upload(&self.device, &self.queue, png, bounds, tile)
+        })?
     }
 }
 
@@ -232,6 +251,8 @@ pub struct Renderer {
     light_dir: Vec3,
     ambient: f32,
     has_frame: bool,
+    textured: Arc<textured::Textured>,
+    clear: wgpu::Color,
 }
 
 impl Renderer {
@@ -267,6 +288,7 @@ impl Renderer {
         });
         let instances = create_instance_buffer(&device, INITIAL_INSTANCES);
         let targets = create_targets(&device, width, height)?;
+        let textured = Arc::new(textured::Textured::new(&device, &layout));
         let info = adapter.get_info();
         tracing::info!(adapter = %info.name, backend = ?info.backend, width, height, "renderer ready");
         Ok(Renderer {
@@ -284,7 +306,25 @@ impl Renderer {
             light_dir: Vec3::new(0.4, 0.8, 0.45).normalize(),
             ambient: 0.35,
             has_frame: false,
+            textured,
+            clear: SKY_COLOR,
         })
+    }
+
+    /// Sets the colour frames are cleared to (default [`SKY_COLOR`]; a transparent one for
+    /// impostor captures).
+    pub fn set_clear(&mut self, color: wgpu::Color) {
+        self.clear = color;
+    }
+
+    /// Decodes an impostor atlas (PNG) and makes its textured box for `bounds`.
+    pub fn upload_impostor(
+        &self,
+        png: &[u8],
+        bounds: &Aabb,
+        tile: u32,
+    ) -> Result<GpuImpostor, RenderError> {
+        self.uploader().upload_impostor(png, bounds, tile)
     }
 
     /// A one-line description of the adapter, e.g. `Gl Cpu 'llvmpipe (LLVM 15.0.6, 256 bits)' ...`.
@@ -336,6 +376,8 @@ impl Renderer {
     pub fn uploader(&self) -> Uploader {
         Uploader {
             device: self.device.clone(),
+            queue: self.queue.clone(),
+            textured: self.textured.clone(),
         }
     }
 
@@ -348,6 +390,26 @@ impl Renderer {
         self.render_view_proj(camera.view_proj(self.aspect()), draws)
     }
 
+    /// Like [`Renderer::render_view_proj`], with textured boxes (cluster impostors) drawn too.
+    pub fn render_with_boxes_view_proj(
+        &mut self,
+        view_proj: Mat4,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+    ) -> Result<FrameTiming, RenderError> {
+        self.render_frame(view_proj, draws, boxes)
+    }
+
+    /// Like [`Renderer::render`], with textured boxes (cluster impostors) drawn too.
+    pub fn render_with_boxes(
+        &mut self,
+        camera: &Camera,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+    ) -> Result<FrameTiming, RenderError> {
+        self.render_frame(camera.view_proj(self.aspect()), draws, boxes)
+    }
+
     /// Like [`Renderer::render`] with an explicit world-to-clip matrix (WebGPU clip space),
     /// e.g. an orthographic bird's-eye view.
     pub fn render_view_proj(
@@ -355,9 +417,18 @@ impl Renderer {
         view_proj: Mat4,
         draws: &[Draw<'_>],
     ) -> Result<FrameTiming, RenderError> {
+        self.render_frame(view_proj, draws, &[])
+    }
+
+    fn render_frame(
+        &mut self,
+        view_proj: Mat4,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+    ) -> Result<FrameTiming, RenderError> {
         let start = Instant::now();
         let device = self.device.clone();
-        let mut timing = scoped(&device, || self.submit_frame(view_proj, draws))??;
+        let mut timing = scoped(&device, || self.submit_frame(view_proj, draws, boxes))??;
         timing.cpu_submit_s = start.elapsed().as_secs_f64();
         self.device.poll(wgpu::PollType::wait_indefinitely())?;
         timing.total_s = start.elapsed().as_secs_f64();
@@ -453,6 +524,7 @@ impl Renderer {
         &mut self,
         view_proj: Mat4,
         draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
     ) -> Result<FrameTiming, RenderError> {
         self.write_globals(view_proj);
         self.write_instances(draws)?;
@@ -461,7 +533,7 @@ impl Renderer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
-        let timing = self.encode_pass(&mut encoder, draws);
+        let timing = self.encode_pass(&mut encoder, draws, boxes);
         self.queue.submit([encoder.finish()]);
         Ok(timing)
     }
@@ -505,8 +577,14 @@ impl Renderer {
         Ok(())
     }
 
-    /// Records the render pass: clear, then one instanced draw per non-empty mesh.
-    fn encode_pass(&self, encoder: &mut wgpu::CommandEncoder, draws: &[Draw<'_>]) -> FrameTiming {
+    /// Records the render pass: clear, then one instanced draw per non-empty mesh, then the
+    /// textured boxes.
+    fn encode_pass(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+    ) -> FrameTiming {
         let mut pass = self.begin_pass(encoder);
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
@@ -527,6 +605,10 @@ impl Renderer {
             timing.vertices += u64::from(d.mesh.vertex_count);
             timing.draws += 1;
         }
+        self.textured.draw(&mut pass, &self.bind_group, boxes);
+        timing.triangles += 12 * boxes.len() as u64;
+        timing.vertices += 24 * boxes.len() as u64;
+        timing.draws += boxes.len() as u32;
         timing
     }
 
@@ -538,7 +620,7 @@ impl Renderer {
                 depth_slice: None,
                 resolve_target: None,
                 ops: wgpu::Operations {
-                    load: wgpu::LoadOp::Clear(SKY_COLOR),
+                    load: wgpu::LoadOp::Clear(self.clear),
                     store: wgpu::StoreOp::Store,
                 },
             })],

@@ -1,0 +1,133 @@
+//! Hierarchical impostors end to end on the tiny building: `build_with` the client's painter,
+//! then check the hierarchy's invariants and that a textured box seen from a capture direction
+//! looks like the objects it stands in for.
+
+use glam::Mat4;
+use portico_client::impostor::{Painter, face_view};
+use portico_client::render::{Draw, Renderer};
+use portico_data::Database;
+use portico_data::build::{BuildOptions, Quiet, build_with};
+use portico_data::hierarchy::ImpostorPainter;
+use portico_data::import::import_file;
+use std::path::Path;
+
+fn build_tiny(dir: &Path) -> Database {
+    let params = portico_generator::Params {
+        preset: portico_generator::Preset::Tiny,
+        seed: 4,
+        floors: Some(1),
+    };
+    let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
+    let glb = dir.join("tiny.glb");
+    std::fs::write(&glb, &b.glb).unwrap();
+    let db = dir.join("tiny.portico");
+    let mut painter = Painter::new().expect("a renderer (llvmpipe in CI)");
+    build_with(
+        import_file(&glb).unwrap(),
+        &db,
+        &BuildOptions::default(),
+        &Quiet,
+        Some(&mut painter as &mut dyn ImpostorPainter),
+    )
+    .unwrap();
+    Database::open(&db).unwrap()
+}
+
+#[test]
+fn every_object_is_under_one_cluster_and_big_clusters_have_textured_boxes() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = build_tiny(dir.path());
+    let h = db.header().hierarchy.as_ref().expect("hierarchy");
+    let bounds: Vec<_> = db.header().instances.iter().map(|i| i.bounds).collect();
+    h.check(&bounds).unwrap();
+    let textured = h.nodes.iter().filter(|n| n.texture != u32::MAX).count();
+    assert!(textured > 0 && textured <= h.nodes.len());
+    // Every face colour is a colour, and big clusters cover something on every side view.
+    for n in &h.nodes {
+        assert!(
+            n.face_colors
+                .iter()
+                .flatten()
+                .all(|c| (0.0..=1.0).contains(c))
+        );
+    }
+    let root = &h.nodes[h.root().unwrap() as usize];
+    assert!(
+        root.face_colors[0][3] > 0.1,
+        "the building covers its side view"
+    );
+}
+
+#[test]
+fn a_textured_box_seen_from_a_capture_direction_matches_its_objects() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = build_tiny(dir.path());
+    let header = db.header();
+    let h = header.hierarchy.as_ref().unwrap();
+    // The biggest textured cluster.
+    let (id, node) = h
+        .nodes
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| n.texture != u32::MAX)
+        .max_by_key(|(_, n)| n.instance_count)
+        .unwrap();
+    let size = 96;
+    let mut r = Renderer::new(size, size).unwrap();
+    r.set_clear(wgpu::Color::TRANSPARENT);
+    let png = db.segment(node.texture).unwrap();
+    let imp = r.upload_impostor(&png, &node.bounds, node.tile).unwrap();
+    let meshes: Vec<_> = h
+        .instances_under(id as u32)
+        .into_iter()
+        .map(|i| {
+            let inst = &header.instances[i as usize];
+            let lod = header.lods_of(inst)[0];
+            let color = header.materials[inst.material as usize].base_color;
+            (
+                r.upload(&db.segment(lod.segment).unwrap()).unwrap(),
+                inst,
+                color,
+            )
+        })
+        .collect();
+    for face in [0usize, 1, 4, 5] {
+        let vp = face_view(&node.bounds, face);
+        let draws: Vec<Draw> = meshes
+            .iter()
+            .map(|(m, inst, color)| Draw {
+                mesh: m,
+                transform: Mat4::from_cols_array(&inst.transform),
+                color: *color,
+            })
+            .collect();
+        r.render_view_proj(vp, &draws).unwrap();
+        let objects = r.read_pixels().unwrap();
+        r.render_with_boxes_view_proj(vp, &[], &[&imp]).unwrap();
+        let boxed = r.read_pixels().unwrap();
+        let covered = |img: &image::RgbaImage| img.pixels().filter(|p| p[3] >= 128).count();
+        let (a, b) = (covered(&objects), covered(&boxed));
+        assert!(a > 0, "face {face}: the objects show");
+        let coverage_diff = a.abs_diff(b) as f64 / a.max(b) as f64;
+        assert!(coverage_diff < 0.15, "face {face}: coverage {a} vs {b}");
+        // Mean colour difference over pixels both cover, per channel (0..255).
+        let (mut sum, mut n) = (0u64, 0u64);
+        for (p, q) in objects.pixels().zip(boxed.pixels()) {
+            if p[3] >= 128 && q[3] >= 128 {
+                sum += (0..3).map(|k| u64::from(p[k].abs_diff(q[k]))).sum::<u64>();
+                n += 3;
+            }
+        }
+        let mean = sum as f64 / n.max(1) as f64;
+        assert!(
+            mean < 24.0,
+            "face {face}: mean colour difference {mean:.1} of 255"
+        );
+        if let Ok(out) = std::env::var("PORTICO_IMPOSTOR_PNG") {
+            objects
+                .save(format!("{out}/face{face}_objects.png"))
+                .unwrap();
+            boxed.save(format!("{out}/face{face}_box.png")).unwrap();
+        }
+    }
+}
