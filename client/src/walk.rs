@@ -202,6 +202,7 @@ impl<'a> Session<'a> {
             Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
         let cost = calibrate(&mut renderer)?;
         let policy = Policy {
+            impostors: cfg.elision == Algorithm::Impostors,
             cache_bytes: cfg.cache_bytes,
             screen: [cfg.size.0, cfg.size.1],
             frame_time_s: cfg.budget_s as f32,

@@ -117,6 +117,8 @@ pub struct Policy {
     pub read_bytes: u64,
     /// Bytes the client can hold: the lookahead set stops growing here (§5.2.2, condition 2).
     pub cache_bytes: u64,
+    /// The client draws clusters as impostors: list their textured boxes before geometry.
+    pub impostors: bool,
 }
 
 impl Default for Policy {
@@ -131,6 +133,7 @@ impl Default for Policy {
             screen: [640, 480],
             read_bytes: 4 << 20,
             cache_bytes: 64 << 20,
+            impostors: false,
         }
     }
 }

@@ -187,7 +187,11 @@ impl Prefetcher {
                 }
             }
         }
-        let stab_items = self.with_textures(stab_items, &cands);
+        let stab_items = if policy.impostors {
+            self.with_textures(stab_items, &cands)
+        } else {
+            stab_items
+        };
         Ok((ranged.len() as u32, stab_items, cands, lookahead_cells))
     }
 
