@@ -129,20 +129,14 @@ fn a_loadtest_measures_the_policy_and_both_baselines_and_writes_its_report() {
     // everything would draw, so it can only be short of what demand fetch (which asks once it
     // is already short) is short of. Timing on a shared machine could in principle reorder
     // two nearly equal runs, so the comparison is on the whole deficit in LOD levels (skipped
-    // LODs plus skipped objects' levels), where the oracle's lead is large, with the LODs
-    // skipped alone checked for a clear ordering too.
+    // LODs plus skipped objects' levels), where the oracle's lead is about 2x. (LODs skipped
+    // alone, a few tenths per frame, flipped once on a loaded machine: too close to assert.)
     let (demand, oracle) = (s.get("demand").unwrap(), s.get("oracle").unwrap());
     assert!(
         oracle.lod_deficit_mean <= demand.lod_deficit_mean,
         "oracle deficit {} vs demand {}",
         oracle.lod_deficit_mean,
         demand.lod_deficit_mean
-    );
-    assert!(
-        oracle.lods_skipped_mean <= demand.lods_skipped_mean,
-        "oracle LODs skipped {} vs demand {}",
-        oracle.lods_skipped_mean,
-        demand.lods_skipped_mean
     );
 
     // The outputs.
