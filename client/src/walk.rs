@@ -342,8 +342,9 @@ fn load_model(remote: &Remote) -> Result<Model> {
     })
 }
 
-/// Funkhouser §4.2.3: C1, C2, C3 from timed sample draws at start-up.
-fn calibrate(r: &mut Renderer) -> Result<CostModel> {
+/// Funkhouser §4.2.3: C1, C2, C3 from timed sample draws at start-up (the walk and the
+/// benchmark both start this way).
+pub(crate) fn calibrate(r: &mut Renderer) -> Result<CostModel> {
     let n = 24u32;
     let mut mesh = Mesh::default();
     for j in 0..=n {

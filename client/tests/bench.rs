@@ -4,33 +4,14 @@
 
 use portico_client::bench::{BenchConfig, BenchSummary, RunKind, RunSummary, report, run};
 use portico_client::elision::Algorithm;
-use portico_data::build::{BuildOptions, Quiet, build};
-use portico_data::import::import_file;
 use portico_data::path::{PathKind, generate};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 const FRAMES: u64 = 20;
 
-/// Builds the tiny building into `dir`; returns the database file.
-fn build_tiny(dir: &Path) -> PathBuf {
-    let params = portico_generator::Params {
-        preset: portico_generator::Preset::Tiny,
-        seed: 2,
-        floors: Some(1),
-    };
-    let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
-    let glb = dir.join("tiny.glb");
-    std::fs::write(&glb, &b.glb).unwrap();
-    let db = dir.join("tiny.portico");
-    build(
-        import_file(&glb).unwrap(),
-        &db,
-        &BuildOptions::default(),
-        &Quiet,
-    )
-    .unwrap();
-    db
-}
+mod common;
+
+use common::build_tiny;
 
 fn config(dir: &Path) -> BenchConfig {
     let db = build_tiny(dir);

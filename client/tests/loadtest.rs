@@ -3,46 +3,16 @@
 
 use portico_client::loadtest::{Link, LinkError, LoadtestConfig, LoadtestSummary, run};
 use portico_client::policy::{parse_policy, policy_spec};
-use portico_data::build::{BuildOptions, Quiet, build};
-use portico_data::import::import_file;
 use portico_data::path::{CameraPath, PathKind, generate};
 use portico_protocol::Policy;
-use portico_server::{AppState, Config};
 use std::path::{Path, PathBuf};
 
-/// Builds the tiny building and serves it on a background runtime; returns the base URL and
-/// the database path.
+mod common;
+
+/// The tiny building served in this process: base URL and database file.
 fn serve_tiny(dir: &Path) -> (String, PathBuf) {
-    let params = portico_generator::Params {
-        preset: portico_generator::Preset::Tiny,
-        seed: 2,
-        floors: Some(1),
-    };
-    let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
-    let glb = dir.join("tiny.glb");
-    std::fs::write(&glb, &b.glb).unwrap();
-    let db = dir.join("tiny.portico");
-    build(
-        import_file(&glb).unwrap(),
-        &db,
-        &BuildOptions::default(),
-        &Quiet,
-    )
-    .unwrap();
-    let state = AppState::open(&db, Config::default()).unwrap();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let rt = tokio::runtime::Runtime::new().unwrap();
-        rt.block_on(async move {
-            let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-            tx.send(format!("http://{}", l.local_addr().unwrap()))
-                .unwrap();
-            portico_server::serve(state, l, std::future::pending())
-                .await
-                .unwrap();
-        });
-    });
-    (rx.recv().unwrap(), db)
+    let (url, _, db) = common::serve_tiny(dir);
+    (url, db)
 }
 
 /// A brisk tour (so 40 frames of 20 ms cross into new rooms).

@@ -3,46 +3,17 @@
 
 use portico_client::elision::Algorithm;
 use portico_client::walk::{WalkConfig, walk};
-use portico_data::build::{BuildOptions, Quiet, build};
-use portico_data::import::import_file;
 use portico_data::path::{PathKind, generate};
 use portico_protocol::Policy;
-use portico_server::{AppState, Config};
+use portico_server::AppState;
 use std::path::PathBuf;
 
-/// Builds the tiny building and serves it on a background runtime; returns the base URL.
+mod common;
+
+/// The tiny building served in this process: base URL and server state.
 fn serve_tiny(dir: &std::path::Path) -> (String, std::sync::Arc<AppState>) {
-    let params = portico_generator::Params {
-        preset: portico_generator::Preset::Tiny,
-        seed: 2,
-        floors: Some(1),
-    };
-    let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
-    let glb = dir.join("tiny.glb");
-    std::fs::write(&glb, &b.glb).unwrap();
-    let db = dir.join("tiny.portico");
-    build(
-        import_file(&glb).unwrap(),
-        &db,
-        &BuildOptions::default(),
-        &Quiet,
-    )
-    .unwrap();
-    let state = AppState::open(&db, Config::default()).unwrap();
-    let (tx, rx) = std::sync::mpsc::channel();
-    let s = state.clone();
-    std::thread::spawn(move || {
-        let rt = tokio::runtime::Runtime::new().unwrap();
-        rt.block_on(async move {
-            let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-            tx.send(format!("http://{}", l.local_addr().unwrap()))
-                .unwrap();
-            portico_server::serve(s, l, std::future::pending())
-                .await
-                .unwrap();
-        });
-    });
-    (rx.recv().unwrap(), state)
+    let (url, state, _) = common::serve_tiny(dir);
+    (url, state)
 }
 
 fn config(server: String, out: PathBuf, cache_bytes: u64) -> WalkConfig {

@@ -66,7 +66,6 @@ use fidelity::{FidelityAccumulator, RefPoint};
 use glam::{Mat4, Vec3};
 use image::RgbaImage;
 use portico_data::cells::realtime::Frustum;
-use portico_data::geometry::{Mesh, Vertex, encode_geometry};
 use portico_data::path::CameraPath;
 use scene::Scene;
 use serde::Serialize;
@@ -461,37 +460,14 @@ pub fn run(cfg: &BenchConfig, progress: &mut dyn FnMut(u64, u64)) -> Result<Benc
     std::fs::create_dir_all(&cfg.out).with_context(|| format!("creating {}", cfg.out.display()))?;
     let mut renderer = Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
     let scene = Scene::load(&cfg.db, &renderer, &cfg.critical)?;
-    let cost = calibrate(&mut renderer)?;
+    // Funkhouser §4.2.3: C1, C2, C3 from timed sample draws at start-up, as the walk client.
+    let cost = crate::walk::calibrate(&mut renderer)?;
     let mut bench = Bench::new(cfg, &scene, cost);
     bench.run(&mut renderer, progress)?;
     let mut summary = bench.summarise(&renderer, start.elapsed().as_secs_f64());
     summary.files = report::FILES.iter().map(|f| (*f).to_owned()).collect();
     report::write_all(&cfg.out, &summary, &bench.runs_rows())?;
     Ok(summary)
-}
-
-/// Funkhouser §4.2.3: C1, C2, C3 from timed sample draws at start-up (as the walk client).
-fn calibrate(r: &mut Renderer) -> Result<CostModel> {
-    let n = 24u32;
-    let mut mesh = Mesh::default();
-    for j in 0..=n {
-        for i in 0..=n {
-            let p = [i as f32 / n as f32, j as f32 / n as f32, 0.0];
-            mesh.vertices
-                .push(Vertex::new(p, [0.0, 0.0, 1.0], [0.8, 0.8, 0.8, 1.0]));
-        }
-    }
-    for j in 0..n {
-        for i in 0..n {
-            let a = j * (n + 1) + i;
-            mesh.indices
-                .extend([a, a + 1, a + n + 1, a + 1, a + n + 2, a + n + 1]);
-        }
-    }
-    let gpu = r.upload(&encode_geometry(&mesh))?;
-    let geometry = r.sample_costs(&gpu, &[1, 16, 64, 128])?;
-    let fill = r.sample_fill(&[0.25, 0.5, 1.0])?;
-    Ok(CostModel::calibrate(&geometry, &fill))
 }
 
 /// A run's choice for one frame: `(instance, lod)` pairs to draw, clusters drawn as boxes, and

@@ -1,0 +1,52 @@
+//! What the client's end-to-end tests share: the tiny generated building, built into a
+//! temporary directory, and served by a real server on 127.0.0.1:0 in this process.
+
+#![allow(dead_code)] // each test file uses its own part of this
+
+use portico_data::build::{BuildOptions, Quiet, build};
+use portico_data::import::import_file;
+use portico_server::{AppState, Config};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Builds the tiny building (one storey, seed 2) into `dir`; returns the database file.
+pub fn build_tiny(dir: &Path) -> PathBuf {
+    let params = portico_generator::Params {
+        preset: portico_generator::Preset::Tiny,
+        seed: 2,
+        floors: Some(1),
+    };
+    let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
+    let glb = dir.join("tiny.glb");
+    std::fs::write(&glb, &b.glb).unwrap();
+    let db = dir.join("tiny.portico");
+    build(
+        import_file(&glb).unwrap(),
+        &db,
+        &BuildOptions::default(),
+        &Quiet,
+    )
+    .unwrap();
+    db
+}
+
+/// Builds the tiny building into `dir` and serves it on a background runtime; returns the base
+/// URL, the server's state (for its metrics) and the database file.
+pub fn serve_tiny(dir: &Path) -> (String, Arc<AppState>, PathBuf) {
+    let db = build_tiny(dir);
+    let state = AppState::open(&db, Config::default()).unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let s = state.clone();
+    std::thread::spawn(move || {
+        let rt = tokio::runtime::Runtime::new().unwrap();
+        rt.block_on(async move {
+            let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+            tx.send(format!("http://{}", l.local_addr().unwrap()))
+                .unwrap();
+            portico_server::serve(s, l, std::future::pending())
+                .await
+                .unwrap();
+        });
+    });
+    (rx.recv().unwrap(), state, db)
+}
