@@ -188,7 +188,7 @@ fn database_id(addr: &str) -> Option<String> {
 }
 
 #[test]
-fn serve_picks_up_a_rebuilt_file_on_sighup() {
+fn serve_picks_up_a_rebuilt_file_on_sighup_and_stops_on_sigterm() {
     use std::io::BufRead;
     let dir = tempfile::tempdir().unwrap();
     let glb = generated(dir.path());
@@ -230,7 +230,26 @@ fn serve_picks_up_a_rebuilt_file_on_sighup() {
     let reloaded = lines.next().unwrap().unwrap();
     assert!(reloaded.starts_with("serving "), "{reloaded}");
     let after = database_id(&addr).expect("manifest after reload");
-    let _ = child.kill();
-    let _ = child.wait();
     assert_ne!(before, after, "the rebuilt file is served");
+    // SIGTERM drains and exits cleanly (bounded wait: 10 s).
+    let term = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(term.success());
+    let mut status = None;
+    for _ in 0..200 {
+        status = child.try_wait().unwrap();
+        if status.is_some() {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let Some(status) = status else {
+        let _ = child.kill();
+        panic!("the server did not stop on SIGTERM");
+    };
+    assert!(status.success(), "{status}");
+    let rest: Vec<String> = lines.map_while(Result::ok).collect();
+    assert_eq!(rest.last().map(String::as_str), Some("stopped"), "{rest:?}");
 }

@@ -93,6 +93,11 @@ pub struct Schedule {
     listed: HashMap<u32, Instant>,
     /// Delivered, with the event sequence number, until the frame loop has taken it.
     delivered: HashMap<u32, u64>,
+    /// Delivered and taken by the frame loop, with the number of the first prefetch request
+    /// whose held set includes it: an answer to an earlier request may still list it.
+    taken: HashMap<u32, u64>,
+    /// Prefetch requests sent so far.
+    asks: u64,
     inflight: HashSet<u32>,
     /// Failed, with the time it may be asked for again.
     failed: HashMap<u32, Instant>,
@@ -101,6 +106,7 @@ pub struct Schedule {
 impl Schedule {
     /// A new need list, most urgent first, replacing the last one.
     pub fn refresh(&mut self, wants: Vec<u32>, at: Instant) {
+        self.failed.retain(|_, t| *t > at);
         let now: HashSet<u32> = wants.iter().copied().collect();
         let inflight = &self.inflight;
         self.listed
@@ -112,9 +118,34 @@ impl Schedule {
         self.cursor = 0;
     }
 
-    /// The frame loop has taken every event up to `consumed`: what it took is in its held set.
-    pub fn acknowledge(&mut self, consumed: u64) {
-        self.delivered.retain(|_, s| *s >= consumed);
+    /// The frame loop has taken every event up to `consumed` (the `consumed`-th included):
+    /// what it took is in the held set it publishes from now on. With `answers` (the server
+    /// makes the lists), a taken segment stays known until an answer to a request that listed
+    /// it as held arrives, so an answer computed earlier cannot make it fetched twice.
+    pub fn acknowledge(&mut self, consumed: u64, answers: bool) {
+        let next_ask = self.asks + 1;
+        let taken = &mut self.taken;
+        self.delivered.retain(|&id, s| {
+            if *s > consumed {
+                return true;
+            }
+            if answers {
+                taken.insert(id, next_ask);
+            }
+            false
+        });
+    }
+
+    /// A prefetch request is being sent; returns its number.
+    pub fn asked(&mut self) -> u64 {
+        self.asks += 1;
+        self.asks
+    }
+
+    /// The answer to request `ask` arrived: segments taken before it was sent are in its held
+    /// set, so the server has left them out.
+    pub fn answered(&mut self, ask: u64) {
+        self.taken.retain(|_, first| *first > ask);
     }
 
     /// Segments the server must not list again: delivered but not yet taken, or in flight.
@@ -127,7 +158,10 @@ impl Schedule {
     pub fn peek(&mut self, now: Instant) -> Option<u32> {
         while let Some(&id) = self.wants.get(self.cursor) {
             let resting = self.failed.get(&id).is_some_and(|&t| now < t);
-            if !(self.inflight.contains(&id) || self.delivered.contains_key(&id) || resting) {
+            let busy = self.inflight.contains(&id)
+                || self.delivered.contains_key(&id)
+                || self.taken.contains_key(&id);
+            if !(busy || resting) {
                 return Some(id);
             }
             self.cursor += 1;
@@ -179,6 +213,8 @@ pub async fn drive<F: Fetcher>(
     let mut s = Schedule::default();
     let mut seq = 0u64;
     let mut fetches: JoinSet<Fetched<F::Body>> = JoinSet::new();
+    // What each read request in flight asked for (a task that panics must not strand them).
+    let mut batches: HashMap<tokio::task::Id, Vec<u32>> = HashMap::new();
     let mut asking: Option<JoinHandle<Answered>> = None;
     // A frame state the server has not yet been asked about.
     let mut unasked: Option<Ask> = None;
@@ -186,7 +222,7 @@ pub async fn drive<F: Fetcher>(
         if asking.is_none()
             && let Some(ask) = unasked.take()
         {
-            asking = Some(ask_server(&fetcher, &s, policy, ask));
+            asking = Some(ask_server(&fetcher, &mut s, policy, ask));
         }
         while fetches.len() < parallel.max(1) {
             let ids = next_batch(&mut s, &fetcher);
@@ -194,10 +230,12 @@ pub async fn drive<F: Fetcher>(
                 break;
             }
             let f = fetcher.clone();
-            fetches.spawn(async move {
+            let asked = ids.clone();
+            let task = fetches.spawn(async move {
                 let got = f.batch(ids.clone()).await;
                 (ids, got)
             });
+            batches.insert(task.id(), asked);
         }
         let event = tokio::select! {
             changed = state.changed() => {
@@ -205,7 +243,7 @@ pub async fn drive<F: Fetcher>(
                     break;
                 }
                 let Some(ask) = state.borrow_and_update().clone() else { continue };
-                s.acknowledge(ask.consumed);
+                s.acknowledge(ask.consumed, ask.wants.is_none());
                 match ask.wants {
                     Some(ref wants) => s.refresh(wants.clone(), ask.at),
                     None => unasked = Some(ask),
@@ -215,16 +253,27 @@ pub async fn drive<F: Fetcher>(
             answered = async { asking.as_mut().expect("guarded").await }, if asking.is_some() => {
                 asking = None;
                 match answered {
-                    Ok((at, Ok(resp))) => {
+                    Ok((ask, at, Ok(resp))) => {
+                        s.answered(ask);
                         s.refresh(resp.items.iter().map(|i| i.segment).collect(), at);
                         Event::Answer(Box::new(resp))
                     }
-                    Ok((_, Err(e))) => Event::Failed(format!("{e:#}")),
+                    Ok((_, _, Err(e))) => Event::Failed(format!("{e:#}")),
                     Err(e) => Event::Failed(format!("prefetch task: {e}")),
                 }
             }
-            Some(done) = fetches.join_next(), if !fetches.is_empty() => {
-                let Ok((ids, got)) = done else { continue };
+            Some(done) = fetches.join_next_with_id(), if !fetches.is_empty() => {
+                let (ids, got) = match done {
+                    Ok((task, (ids, got))) => {
+                        batches.remove(&task);
+                        (ids, got)
+                    }
+                    // The task panicked (a decoder or the GPU upload): its segments failed.
+                    Err(e) => {
+                        let ids = batches.remove(&e.id()).unwrap_or_default();
+                        (ids, Err(anyhow::anyhow!("read task: {e}")))
+                    }
+                };
                 if deliver(&mut s, ids, got, &mut seq, &tx).await.is_err() {
                     break;
                 }
@@ -316,17 +365,18 @@ async fn deliver<B>(
     }
     Ok(())
 }
-/// A finished prefetch request: when it was asked, and the answer.
-type Answered = (Instant, anyhow::Result<PrefetchResponse>);
+/// A finished prefetch request: its number, when it was asked, and the answer.
+type Answered = (u64, Instant, anyhow::Result<PrefetchResponse>);
 
 /// Starts one `POST /v1/prefetch` for a frame state.
 fn ask_server<F: Fetcher>(
     fetcher: &F,
-    s: &Schedule,
+    s: &mut Schedule,
     policy: Policy,
     ask: Ask,
 ) -> JoinHandle<Answered> {
     let held: HashSet<u32> = ask.held.iter().copied().chain(s.pending()).collect();
+    let number = s.asked();
     let req = PrefetchRequest {
         version: PROTOCOL_VERSION,
         observer: ask.observer,
@@ -336,7 +386,7 @@ fn ask_server<F: Fetcher>(
     let f = fetcher.clone();
     tokio::spawn(async move {
         let at = Instant::now();
-        (at, f.prefetch(req).await)
+        (number, at, f.prefetch(req).await)
     })
 }
 
@@ -362,8 +412,31 @@ mod tests {
         let mut pending: Vec<u32> = s.pending().collect();
         pending.sort();
         assert_eq!(pending, vec![1, 2, 4]);
-        s.acknowledge(3);
+        s.acknowledge(2, false);
         assert_eq!(s.pending().collect::<Vec<_>>(), vec![1]);
+    }
+
+    #[test]
+    fn an_answer_older_than_a_delivery_cannot_make_it_fetched_twice() {
+        let t0 = Instant::now();
+        let mut s = Schedule::default();
+        let first = s.asked();
+        s.refresh(vec![5], t0);
+        assert_eq!(s.next(t0), Some(5));
+        s.finished(5, Ok(1), t0);
+        // Request 2 goes out while 5 is still untaken; the frame loop then takes it.
+        let second = s.asked();
+        s.acknowledge(1, true);
+        // The answer to request 2 (computed before 5 was held) lists 5 again: not fetched.
+        s.answered(second);
+        s.refresh(vec![5], t0);
+        assert_eq!(s.next(t0), None, "taken after request {second} was sent");
+        // Request 3 holds it: from its answer on, 5 is the cache's business again.
+        let third = s.asked();
+        s.answered(third);
+        s.refresh(vec![5], t0);
+        assert_eq!(s.next(t0), Some(5), "evicted and wanted again");
+        let _ = first;
     }
 
     #[test]

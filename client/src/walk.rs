@@ -301,7 +301,12 @@ fn load_model(remote: &Remote) -> Result<Model> {
             Some(_) => Some(remote.cells().await?),
             None => None,
         };
-        let bounds = m.header.instances.iter().map(|i| i.bounds).collect();
+        let bounds: Vec<_> = m.header.instances.iter().map(|i| i.bounds).collect();
+        // Indices from the manifest are used as they are below: check them once.
+        if let Some(h) = &m.header.hierarchy {
+            h.check(&bounds)
+                .map_err(|e| anyhow::anyhow!("{}: the manifest's hierarchy: {e}", remote.base()))?;
+        }
         let model_triangles = m
             .header
             .instances
@@ -378,6 +383,8 @@ struct Walker<'a> {
     consumed: u64,
     traversal: Traversal,
     colour_boxes: std::collections::HashMap<u32, GpuMesh>,
+    /// Segments larger than the whole cache: reported as held so no answer lists them again.
+    too_big: std::collections::HashSet<u32>,
     latencies: Vec<f64>,
     failures: u64,
     segments_read: u64,
@@ -397,6 +404,7 @@ impl<'a> Walker<'a> {
             consumed: 0,
             traversal: Traversal::default(),
             colour_boxes: std::collections::HashMap::new(),
+            too_big: std::collections::HashSet::new(),
             latencies: Vec::new(),
             failures: 0,
             segments_read: 0,
@@ -421,13 +429,21 @@ impl<'a> Walker<'a> {
                     self.segments_read += 1;
                     self.bytes_read += bytes;
                     self.latencies.push(listed_at.elapsed().as_secs_f64());
-                    let value = match body {
-                        Payload::Mesh(m) => Resident::Mesh(m),
-                        Payload::Stab(s) => Resident::Stab(s),
-                        Payload::Impostor(i) => Resident::Impostor(i),
+                    // An atlas is charged what it holds on the GPU, not its PNG size.
+                    let (value, charge) = match body {
+                        Payload::Mesh(m) => (Resident::Mesh(m), bytes),
+                        Payload::Stab(s) => (Resident::Stab(s), bytes),
+                        Payload::Impostor(i) => {
+                            let gpu = i.gpu_bytes();
+                            (Resident::Impostor(i), bytes.max(gpu))
+                        }
                     };
-                    if let Ok(released) = self.cache.insert(id, value, bytes) {
-                        row.released_segments += released.len() as u32;
+                    match self.cache.insert(id, value, charge) {
+                        Ok(released) => row.released_segments += released.len() as u32,
+                        // Larger than the whole cache: never ask for it again.
+                        Err(_) => {
+                            self.too_big.insert(id);
+                        }
                     }
                 }
                 Event::Answer(resp) => resp.evict.iter().for_each(|&id| self.cache.demote(id)),
@@ -586,7 +602,11 @@ impl<'a> Walker<'a> {
     fn publish(&self, io: &IoStage, observer: Observer) {
         let _ = io.state.send(Some(Ask {
             observer,
-            held: self.cache.ids().collect(),
+            held: self
+                .cache
+                .ids()
+                .chain(self.too_big.iter().copied())
+                .collect(),
             consumed: self.consumed,
             wants: None,
             at: tokio::time::Instant::now(),
@@ -706,13 +726,15 @@ impl Sight<'_> {
 }
 
 /// Makes the average-colour boxes of `boxes` that do not exist yet (their colours are in the
-/// header: nothing to fetch).
+/// header: nothing to fetch) and frees the others, so they never add up outside the cache.
 fn make_colour_boxes(
     made: &mut std::collections::HashMap<u32, GpuMesh>,
     h: &Hierarchy,
     boxes: &[(u32, Stand)],
     r: &Renderer,
 ) {
+    let wanted: std::collections::HashSet<u32> = boxes.iter().map(|b| b.0).collect();
+    made.retain(|n, _| wanted.contains(n));
     for &(n, _) in boxes {
         if let std::collections::hash_map::Entry::Vacant(e) = made.entry(n) {
             let node = &h.nodes[n as usize];

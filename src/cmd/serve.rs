@@ -61,6 +61,9 @@ pub fn run(a: Args) -> Result<()> {
         .with_context(|| format!("cannot listen on {}", a.listen))?;
     listener.set_nonblocking(true)?;
     let addr = listener.local_addr()?;
+    // Signals are watched once for the whole life of the process and queued, so one that
+    // arrives while a reload drains or reopens is not lost.
+    let mut signals = rt.block_on(async { watch_signals() })?;
     loop {
         let db = state.db();
         eprintln!(
@@ -71,16 +74,7 @@ pub fn run(a: Args) -> Result<()> {
             state.database_id
         );
         let l = listener.try_clone()?;
-        let serving = state.clone();
-        let stop = rt.block_on(async move {
-            let (tx, rx) = tokio::sync::oneshot::channel();
-            let l = tokio::net::TcpListener::from_std(l)?;
-            portico_server::serve(serving, l, async move {
-                let _ = tx.send(stop_signal().await);
-            })
-            .await?;
-            Ok::<_, anyhow::Error>(rx.await.unwrap_or(Stop::Quit))
-        })?;
+        let stop = rt.block_on(serve_until_signal(state.clone(), l, &mut signals))?;
         if stop == Stop::Quit {
             break;
         }
@@ -96,7 +90,40 @@ pub fn run(a: Args) -> Result<()> {
     Ok(())
 }
 
-/// Why [`stop_signal`] returned.
+/// How long requests in flight may take to finish after a stop or reload signal before their
+/// connections are dropped (a slow client must not hold a reload up for ever).
+const DRAIN: Duration = Duration::from_secs(10);
+
+/// Serves `state` on `listener` until a signal arrives, then drains for at most [`DRAIN`].
+async fn serve_until_signal(
+    state: std::sync::Arc<AppState>,
+    listener: std::net::TcpListener,
+    signals: &mut tokio::sync::mpsc::UnboundedReceiver<Stop>,
+) -> Result<Stop> {
+    let listener = tokio::net::TcpListener::from_std(listener)?;
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let mut server = tokio::spawn(portico_server::serve(state, listener, async move {
+        let _ = stop_rx.await;
+    }));
+    let stop = tokio::select! {
+        s = signals.recv() => s.unwrap_or(Stop::Quit),
+        done = &mut server => {
+            done??;
+            return Ok(Stop::Quit);
+        }
+    };
+    let _ = stop_tx.send(());
+    match tokio::time::timeout(DRAIN, &mut server).await {
+        Ok(done) => done??,
+        Err(_) => {
+            eprintln!("requests still running after {DRAIN:?}: closing their connections");
+            server.abort();
+        }
+    }
+    Ok(stop)
+}
+
+/// What a signal asks the server to do.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Stop {
     /// Ctrl-C or SIGTERM: drain and exit.
@@ -105,29 +132,35 @@ enum Stop {
     Reload,
 }
 
-/// Waits for Ctrl-C, SIGTERM or SIGHUP.
-async fn stop_signal() -> Stop {
-    let ctrl_c = async {
-        let _ = tokio::signal::ctrl_c().await;
-    };
-    #[cfg(unix)]
-    let (term, hup) = {
-        use tokio::signal::unix::{SignalKind, signal};
-        let wait = |kind| async move {
-            match signal(kind) {
-                Ok(mut s) => {
-                    s.recv().await;
-                }
-                Err(_) => std::future::pending::<()>().await,
+/// Forwards Ctrl-C and SIGTERM (stop) and SIGHUP (reload) into a queue, for the whole life of
+/// the process.
+fn watch_signals() -> Result<tokio::sync::mpsc::UnboundedReceiver<Stop>> {
+    let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+    let quit = tx.clone();
+    tokio::spawn(async move {
+        while tokio::signal::ctrl_c().await.is_ok() {
+            if quit.send(Stop::Quit).is_err() {
+                break;
             }
-        };
-        (wait(SignalKind::terminate()), wait(SignalKind::hangup()))
-    };
-    #[cfg(not(unix))]
-    let (term, hup) = (std::future::pending::<()>(), std::future::pending::<()>());
-    tokio::select! {
-        _ = ctrl_c => Stop::Quit,
-        _ = term => Stop::Quit,
-        _ = hup => Stop::Reload,
+        }
+    });
+    #[cfg(unix)]
+    {
+        use tokio::signal::unix::{SignalKind, signal};
+        for (kind, what) in [
+            (SignalKind::terminate(), Stop::Quit),
+            (SignalKind::hangup(), Stop::Reload),
+        ] {
+            let mut stream = signal(kind).context("installing a signal handler")?;
+            let tx = tx.clone();
+            tokio::spawn(async move {
+                while stream.recv().await.is_some() {
+                    if tx.send(what).is_err() {
+                        break;
+                    }
+                }
+            });
+        }
     }
+    Ok(rx)
 }

@@ -140,7 +140,11 @@ async fn one_client(
                     held.remove(e);
                 }
             }
-            Err(_) => out.errors += 1,
+            Err(_) => {
+                out.errors += 1;
+                // A refused or failing server is not hammered in a tight loop.
+                tokio::time::sleep(Duration::from_secs_f64(cfg.frame_s.max(1e-3))).await;
+            }
         }
         f += 1;
     }

@@ -94,8 +94,10 @@ impl Textured {
                     attributes: &ATTRIBUTES,
                 })],
             },
+            // Faces wind counter-clockwise seen from outside: through a transparent texel of a
+            // near face one sees what is behind the box, not the far face's mirrored inside.
             primitive: wgpu::PrimitiveState {
-                cull_mode: None,
+                cull_mode: Some(wgpu::Face::Back),
                 ..Default::default()
             },
             depth_stencil: Some(wgpu::DepthStencilState {
@@ -135,7 +137,8 @@ impl Textured {
             .map_err(|e| RenderError::Geometry(format!("impostor atlas: {e}")))?
             .to_rgba8();
         let (w, h) = img.dimensions();
-        if tile == 0 || w != tile * 3 || h != tile * 2 {
+        let expected = tile.checked_mul(3).zip(tile.checked_mul(2));
+        if tile == 0 || expected != Some((w, h)) {
             return Err(RenderError::Geometry(format!(
                 "impostor atlas is {w}x{h}, not 3 x 2 tiles of {tile}"
             )));

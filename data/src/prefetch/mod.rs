@@ -188,7 +188,7 @@ impl Prefetcher {
             }
         }
         let stab_items = if policy.impostors {
-            self.with_textures(stab_items, &cands)
+            self.with_textures(stab_items, &cands, glam::Vec3::from(obs.eye))
         } else {
             stab_items
         };
@@ -198,8 +198,13 @@ impl Prefetcher {
     /// Appends the textured boxes of the clusters above the lookahead objects (the objects in
     /// view first, then by frames until visible): a cluster's impostor comes before any
     /// object's geometry, so the coarse view of a whole wing arrives before its furniture
-    /// (DESIGN §6).
-    fn with_textures(&self, mut items: Vec<NeedItem>, cands: &[Candidate]) -> Vec<NeedItem> {
+    /// (DESIGN §6). Clusters around the eye are left out: no box can stand in for them.
+    fn with_textures(
+        &self,
+        mut items: Vec<NeedItem>,
+        cands: &[Candidate],
+        eye: glam::Vec3,
+    ) -> Vec<NeedItem> {
         let Some(h) = &self.db.header().hierarchy else {
             return items;
         };
@@ -216,7 +221,9 @@ impl Prefetcher {
                 if !seen.insert(node) {
                     break;
                 }
-                if n.texture != u32::MAX {
+                let around_eye =
+                    (0..3).all(|k| n.bounds.min[k] <= eye[k] && eye[k] <= n.bounds.max[k]);
+                if n.texture != u32::MAX && !around_eye {
                     let bytes = self.segment_bytes(n.texture);
                     items.push(need(n.texture, NeedKind::Texture, 0, bytes, c.frames));
                 }
@@ -361,9 +368,11 @@ fn read_set(
     let mut items = Vec::new();
     let mut used = 0u64;
     let mut truncated = false;
+    // Stab lists are as mandatory as the coarsest LODs; impostor atlases come before the
+    // geometry but within the budget.
     let ordered = stabs
         .into_iter()
-        .map(|s| (true, s))
+        .map(|s| (s.kind == NeedKind::Stab, s))
         .chain(cands.iter().map(|c| (c.level == 0, c.item)));
     for (coarsest, item) in ordered {
         if item.kind == NeedKind::Geometry && coarsest {
