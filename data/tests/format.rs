@@ -108,6 +108,12 @@ fn built(dir: &Path, flatten: bool) -> std::path::PathBuf {
 fn round_trip_preserves_instancing_lods_and_every_segment() {
     let dir = tempfile::tempdir().unwrap();
     let path = built(dir.path(), false);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&path).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o644, "a server running as another user can read it");
+    }
     let db = Database::open(&path).expect("open");
     db.verify_all().expect("checksums");
     let h = db.header();

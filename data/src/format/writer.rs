@@ -122,6 +122,15 @@ impl DbWriter {
             .write_all(bytemuck::bytes_of(&prologue))
             .map_err(io)?;
         let file = self.out.into_inner().map_err(|e| io(e.into_error()))?;
+        // Temporary files are private (0600); a database is meant to be read by a server that
+        // may run as another user (the Docker image's), so it is world-readable, like any file
+        // a build tool writes.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            file.set_permissions(std::fs::Permissions::from_mode(0o644))
+                .map_err(io)?;
+        }
         file.sync_all().map_err(io)?;
         drop(file);
         self.temp
