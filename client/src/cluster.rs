@@ -63,6 +63,8 @@ pub struct Cut {
     pub lods: Vec<Option<usize>>,
     /// Visible objects stood in for by a box.
     pub stood_in: u32,
+    /// Per candidate, whether a box stands in for it.
+    pub stood: Vec<bool>,
     /// Visible objects with nothing drawn for them (no resident LOD and no box above).
     pub objects_skipped: u32,
     /// Predicted render time of everything chosen (s).
@@ -109,6 +111,7 @@ impl Traversal {
     pub fn choose(&mut self, h: &Hierarchy, cands: &[Candidate], f: &Frame<'_>) -> Cut {
         let mut cut = Cut {
             lods: vec![None; cands.len()],
+            stood: vec![false; cands.len()],
             ..Cut::default()
         };
         let cheapest: Vec<Option<(usize, f64)>> = cands
@@ -161,7 +164,10 @@ impl Traversal {
                     };
                     cut.boxes.push((id, stand));
                     boxed.insert(id);
-                    cut.stood_in += count_objects(&nodes, id);
+                    for i in objects_under(&nodes, id) {
+                        cut.stood[i] = true;
+                        cut.stood_in += 1;
+                    }
                 }
             }
         }
@@ -249,17 +255,17 @@ fn assign(
     (nodes, loose)
 }
 
-/// Visible objects beneath a visible cluster.
-fn count_objects(nodes: &HashMap<u32, Node>, id: u32) -> u32 {
-    let mut n = 0;
+/// The visible objects (candidate indices) beneath a visible cluster.
+fn objects_under(nodes: &HashMap<u32, Node>, id: u32) -> Vec<usize> {
+    let mut out = Vec::new();
     let mut stack = vec![id];
     while let Some(c) = stack.pop() {
         if let Some(node) = nodes.get(&c) {
-            n += node.child_objects.len() as u32;
+            out.extend(&node.child_objects);
             stack.extend(&node.child_nodes);
         }
     }
-    n
+    out
 }
 
 /// Phase 3: every drawn object starts at its coarsest resident LOD; the most beneficial first
@@ -369,6 +375,13 @@ mod tests {
             );
             let drawn = cut.lods.iter().filter(|l| l.is_some()).count() as u32;
             assert_eq!(drawn + cut.stood_in, 8, "budget {budget}: {cut:?}");
+            assert!(
+                cut.lods
+                    .iter()
+                    .zip(&cut.stood)
+                    .all(|(l, s)| l.is_some() != *s),
+                "each object drawn or stood in for, never both: {cut:?}"
+            );
         }
     }
 

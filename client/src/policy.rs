@@ -39,9 +39,16 @@ pub fn parse_policy(spec: &str, base: Policy) -> Result<Policy, String> {
             }
             "read" => p.read_bytes = parse_bytes(v).ok_or_else(bad)?,
             "size" => p.size_threshold_px = v.parse().map_err(|_| bad())?,
+            "imp" | "impostors" => {
+                p.impostors = match v {
+                    "1" | "yes" | "true" => true,
+                    "0" | "no" | "false" => false,
+                    _ => return Err(bad()),
+                }
+            }
             _ => {
                 return Err(format!(
-                    "unknown policy key {k:?} (depth, gran, range, look, read, size)"
+                    "unknown policy key {k:?} (depth, gran, range, look, read, size, imp)"
                 ));
             }
         }
@@ -66,11 +73,12 @@ pub fn policy_spec(p: &Policy) -> String {
     let s = serde_json::to_value(p).unwrap_or_default();
     let name = |k: &str| s[k].as_str().unwrap_or("?").to_string();
     format!(
-        "depth={},gran={},range={},look={}",
+        "depth={},gran={},range={},look={}{}",
         p.depth_frames,
         name("granularity"),
         name("range_cull"),
-        name("lookahead_cull")
+        name("lookahead_cull"),
+        if p.impostors { ",imp=1" } else { "" }
     )
 }
 

@@ -168,3 +168,42 @@ fn a_bad_config_is_refused_before_anything_runs() {
     let e = format!("{:#}", run(&cfg, &mut |_, _| {}).unwrap_err());
     assert!(e.contains("127.0.0.1:1"), "{e}");
 }
+
+#[test]
+fn impostor_clients_always_have_something_for_every_visible_object() {
+    let dir = tempfile::tempdir().unwrap();
+    let (server, db) = serve_tiny(dir.path());
+    let mut cfg = config(server, tour(&db), dir.path().join("lt"));
+    let plain = parse_policy("depth=16,gran=object,range=any,look=any", Policy::default()).unwrap();
+    let imp = Policy {
+        impostors: true,
+        ..plain
+    };
+    cfg.policies = vec![(policy_spec(&plain), plain), (policy_spec(&imp), imp)];
+    cfg.baselines = false;
+    let s = run(&cfg, &mut |_, _| {}).unwrap();
+    assert_eq!(
+        names(&s),
+        [
+            "depth=16,gran=object,range=any,look=any",
+            "depth=16,gran=object,range=any,look=any,imp=1"
+        ]
+    );
+    let (plain, imp) = (&s.policies[0], &s.policies[1]);
+    // With average-colour boxes in the header, a visible object lacks a representation only
+    // while its cluster contains the eye; a plain client lacks every object not yet arrived.
+    assert!(
+        imp.objects_skipped_mean <= plain.objects_skipped_mean,
+        "impostors {} vs plain {}",
+        imp.objects_skipped_mean,
+        plain.objects_skipped_mean
+    );
+    for p in [plain, imp] {
+        assert!(
+            p.complete_clients >= 1,
+            "{}: never a complete frame",
+            p.name
+        );
+        assert!(p.first_complete_bytes_mean.is_some_and(|b| b > 0.0));
+    }
+}

@@ -325,6 +325,13 @@ pub struct PolicyResult {
     pub wall_s: f64,
     /// Wall seconds per frame (the frame budget when the simulator kept up).
     pub frame_period_s: f64,
+    /// Clients that reached a frame with every visible object represented (its own LOD, or
+    /// with impostors a box above it).
+    pub complete_clients: u64,
+    /// The first such frame, mean over those clients.
+    pub first_complete_frame_mean: Option<f64>,
+    /// Bytes that had arrived by then, mean over those clients.
+    pub first_complete_bytes_mean: Option<f64>,
     /// Demand fetch's mean LODs skipped divided by this run's (`None` if this one is 0).
     pub lods_skipped_vs_demand: Option<f64>,
     /// Demand fetch's mean LOD deficit divided by this run's.
@@ -538,7 +545,15 @@ fn aggregate(
         (!warm.is_empty())
             .then(|| warm.iter().map(|r| f(r) as f64).sum::<f64>() / warm.len() as f64)
     };
+    let complete: Vec<(u64, u64)> = clients.iter().filter_map(|c| c.first_complete).collect();
+    let mean_of = |f: &dyn Fn(&(u64, u64)) -> u64| {
+        (!complete.is_empty())
+            .then(|| complete.iter().map(|c| f(c) as f64).sum::<f64>() / complete.len() as f64)
+    };
     PolicyResult {
+        complete_clients: complete.len() as u64,
+        first_complete_frame_mean: mean_of(&|c| c.0),
+        first_complete_bytes_mean: mean_of(&|c| c.1),
         kind: match mode {
             Mode::Prefetch(_) => "prefetch",
             Mode::Demand => "demand",

@@ -48,6 +48,7 @@ pub fn markdown(s: &LoadtestSummary) -> String {
     set_table(&mut r, s);
     pivots(&mut r, s);
     network_table(&mut r, s);
+    first_complete(&mut r, s);
     per_client(&mut r, s);
     plots(&mut r, s);
     method(&mut r, s);
@@ -139,6 +140,32 @@ fn headline(r: &mut String, s: &LoadtestSummary) {
         ratio(best.lods_skipped_warm_vs_demand),
         ratio(best.lod_deficit_vs_demand)
     );
+}
+
+/// How soon a cold client draws every visible object (its own LOD, or with impostors a box
+/// above it), and how many bytes that took.
+fn first_complete(r: &mut String, s: &LoadtestSummary) {
+    let _ = writeln!(
+        r,
+        "## First complete frame
+
+| run | clients that got one | first complete frame, mean | bytes arrived by then, mean |
+|---|---|---|---|"
+    );
+    for p in &s.policies {
+        let frame = p
+            .first_complete_frame_mean
+            .map_or("–".into(), |f| format!("{f:.1}"));
+        let bytes = p
+            .first_complete_bytes_mean
+            .map_or("–".into(), |b| format!("{:.0} KB", b / 1e3));
+        let _ = writeln!(
+            r,
+            "| {} | {} of {} | {frame} | {bytes} |",
+            p.name, p.complete_clients, s.clients
+        );
+    }
+    r.push('\n');
 }
 
 /// How evenly the clients fared: LOD deficit per client.

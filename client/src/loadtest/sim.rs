@@ -17,6 +17,7 @@
 use super::link::Pipe;
 use super::world::World;
 use crate::cache::ObjectCache;
+use crate::cluster::{self, Stand, Traversal};
 use crate::cost::CostModel;
 use crate::elision::{Algorithm, Candidate, Choice, Elider};
 use crate::net::Remote;
@@ -109,6 +110,9 @@ pub struct ClientResult {
     pub evictions: u64,
     /// Failed requests.
     pub failures: u64,
+    /// The first frame in which every visible object was represented (its own LOD, or with
+    /// impostors a box above it), and the bytes that had arrived by then.
+    pub first_complete: Option<(u64, u64)>,
 }
 
 /// What the IO task hands the frame loop: segment bodies are just their sizes.
@@ -158,6 +162,10 @@ pub async fn client(s: Setup) -> ClientResult {
         c.take_arrivals();
         let p = (s.offset + f as usize) % s.world.path_frames();
         let (row, decided) = c.frame(p);
+        if c.result.first_complete.is_none() && row.objects_skipped == 0 && row.visible_objects > 0
+        {
+            c.result.first_complete = Some((f, c.result.bytes_fetched));
+        }
         c.result.rows.push(row);
         let published = c.publish(p, f, &decided);
         let _ = state_tx.send(Some(published));
@@ -178,6 +186,8 @@ struct Client {
     /// Resident segments: (bytes, drawn at least once).
     entries: HashMap<u32, (u64, bool)>,
     elider: Elider,
+    /// Maciel's cluster traversal, when the policy asks for impostors and the model has them.
+    traversal: Option<Traversal>,
     cost: CostModel,
     consumed: u64,
     last_answer: Option<AnswerStat>,
@@ -194,6 +204,12 @@ impl Client {
             cache: ObjectCache::new(s.cache_bytes),
             entries: HashMap::new(),
             elider: Elider::new(Algorithm::Optimize, s.world.dt),
+            traversal: match s.mode {
+                Mode::Prefetch(p) if p.impostors && s.world.header.hierarchy.is_some() => {
+                    Some(Traversal::default())
+                }
+                _ => None,
+            },
             cost: CostModel::default(),
             consumed: 0,
             last_answer: None,
@@ -269,7 +285,10 @@ impl Client {
         let mut cands =
             view::candidates(&w.header, &vis.objects, &w.frames[p].viewpoint, &resident);
         let dropped = view::cap_detail(&mut cands, w.size_threshold_px);
-        let decided = self.elider.choose(&cands, &self.cost, None);
+        let (decided, boxes) = match (&mut self.traversal, &w.header.hierarchy) {
+            (Some(t), Some(h)) => impostor_choice(t, h, &w, p, &cands, &self.cost, cache),
+            _ => (self.elider.choose(&cands, &self.cost, None), Vec::new()),
+        };
         let mut row = FrameStat {
             path_frame: p,
             lods_skipped: decided.lods_skipped,
@@ -304,6 +323,9 @@ impl Client {
         if !vis.fallback {
             used.extend(d.eye_stab);
         }
+        // Textured boxes drawn are used and needed now, like geometry.
+        used.extend(&boxes);
+        touched.extend(&boxes);
         // §5.2.3: what is needed now moves to the head of the cache.
         for s in touched.into_iter().chain(d.eye_stab) {
             self.cache.touch(s);
@@ -414,6 +436,81 @@ impl Client {
         self.result.evictions = self.cache.evictions();
         self.result
     }
+}
+
+/// The `impostors` choice (Maciel's traversal over the clusters, [`crate::cluster`]) as the
+/// frame counts it: stood-in objects are not wanted (a box represents them), drawn ones want
+/// their finest allowed LOD. Returns the frame and the texture segments of the boxes drawn.
+fn impostor_choice(
+    t: &mut Traversal,
+    h: &portico_data::hierarchy::Hierarchy,
+    w: &World,
+    p: usize,
+    cands: &[Candidate],
+    cost: &CostModel,
+    cache: &ObjectCache<()>,
+) -> (crate::elision::Frame, Vec<u32>) {
+    let vp = w.frames[p].viewpoint;
+    let pixels = |n: u32| {
+        view::screen_pixels(
+            &h.nodes[n as usize].bounds,
+            &vp.view_proj,
+            vp.size.0,
+            vp.size.1,
+        )
+    };
+    let inside = |n: u32| {
+        let b = &h.nodes[n as usize].bounds;
+        (0..3).all(|i| b.min[i] - 0.05 <= vp.eye[i] && vp.eye[i] <= b.max[i] + 0.05)
+    };
+    let textured = |n: u32| {
+        let s = h.nodes[n as usize].texture;
+        s != u32::MAX && cache.contains(s)
+    };
+    let f = cluster::Frame {
+        pixels: &pixels,
+        eye_inside: &inside,
+        textured: &textured,
+        cost,
+        budget_s: w.dt,
+    };
+    let cut = t.choose(h, cands, &f);
+    let mut frame = crate::elision::Frame {
+        predicted_s: cut.predicted_s,
+        ..Default::default()
+    };
+    for (i, c) in cands.iter().enumerate() {
+        let ch = match cut.lods[i] {
+            Some(l) => {
+                let short = c.lods[..l].iter().filter(|o| !o.resident).count() as u32;
+                frame.lods_skipped += short;
+                Choice {
+                    lod: Some(l),
+                    desired: Some(0),
+                    lods_skipped: short,
+                    object_skipped: false,
+                }
+            }
+            None if cut.stood[i] => Choice::default(),
+            None => {
+                frame.objects_skipped += 1;
+                Choice {
+                    lod: None,
+                    desired: Some(0),
+                    lods_skipped: 0,
+                    object_skipped: true,
+                }
+            }
+        };
+        frame.choices.push(ch);
+    }
+    let textures = cut
+        .boxes
+        .iter()
+        .filter(|(_, stand)| *stand == Stand::Textured)
+        .map(|(n, _)| h.nodes[*n as usize].texture)
+        .collect();
+    (frame, textures)
 }
 
 /// One frame's elision, as the IO side needs it.
