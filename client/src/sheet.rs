@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use glam::{Mat4, Vec3};
 use image::RgbaImage;
 use portico_data::Database;
-use portico_data::geometry::{Mesh, Vertex, encode_geometry};
+use portico_data::geometry::{Aabb, Mesh, encode_geometry};
 use portico_data::path::CameraPath;
 
 /// Tiles images (scaled to `thumb_w` wide) into a grid of `cols` columns.
@@ -36,26 +36,14 @@ pub fn contact_sheet(images: &[RgbaImage], cols: u32, thumb_w: u32) -> Option<Rg
     Some(sheet)
 }
 
-/// A unit cube centred on the origin, for path markers.
+/// A unit cube centred on the origin, for path markers (white, unlit: the draw's colour
+/// shows as it is).
 fn cube() -> Mesh {
-    let mut m = Mesh::default();
-    for (n, u, v) in [
-        (Vec3::X, Vec3::Y, Vec3::Z),
-        (Vec3::Y, Vec3::Z, Vec3::X),
-        (Vec3::Z, Vec3::X, Vec3::Y),
-    ] {
-        for s in [1.0f32, -1.0] {
-            let base = m.vertices.len() as u32;
-            for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-                let p = (n * s + u * a + v * b) * 0.5;
-                m.vertices
-                    .push(Vertex::new(p.into(), (n * s).into(), [1.0; 4]));
-            }
-            m.indices
-                .extend([base, base + 1, base + 2, base, base + 2, base + 3]);
-        }
-    }
-    m
+    let unit = Aabb {
+        min: [-0.5; 3],
+        max: [0.5; 3],
+    };
+    portico_data::hierarchy::colour_box(&unit, &[[1.0; 4]; 6])
 }
 
 /// Renders the storey the path starts on from above (orthographic, everything above eye height

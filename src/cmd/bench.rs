@@ -7,7 +7,7 @@ use crate::progress::Bars;
 use anyhow::{Context, Result};
 use portico_client::bench::{BenchConfig, BenchSummary, RunKind, report};
 use portico_data::Database;
-use portico_data::path::{CameraPath, PathKind, generate};
+use portico_data::path::CameraPath;
 use std::path::PathBuf;
 
 /// Arguments of `portico bench`.
@@ -16,18 +16,8 @@ pub struct Args {
     /// The display database.
     #[arg(long)]
     db: PathBuf,
-    /// A path JSON file (from `portico path`).
-    #[arg(long, conflicts_with = "path_kind")]
-    path: Option<PathBuf>,
-    /// Or generate a standard path from the model's cells.
-    #[arg(long, value_enum)]
-    path_kind: Option<crate::cmd::path::Kind>,
-    /// Legs of a generated tour.
-    #[arg(long, default_value_t = 4)]
-    legs: usize,
-    /// Seed of a generated path.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    #[command(flatten)]
+    route: crate::cmd::path::PathArgs,
     /// Frame-time budget of the elision algorithms, milliseconds.
     #[arg(long, default_value_t = 50.0)]
     budget_ms: f64,
@@ -60,25 +50,15 @@ pub struct Args {
 
 /// Loads the path file or generates a standard path through the database's cells.
 fn load_path(a: &Args) -> Result<CameraPath> {
-    if let Some(f) = &a.path {
-        let text = std::fs::read(f).with_context(|| format!("reading {}", f.display()))?;
-        let p: CameraPath = serde_json::from_slice(&text)
-            .with_context(|| format!("{}: not a path JSON", f.display()))?;
-        p.validate()
-            .map_err(anyhow::Error::msg)
-            .with_context(|| f.display().to_string())?;
-        return Ok(p);
-    }
-    let db = Database::open(&a.db).with_context(|| format!("opening {}", a.db.display()))?;
-    let graph = db.cell_graph()?.with_context(|| {
-        format!(
-            "{}: built without cells; give a path file with --path",
-            a.db.display()
-        )
-    })?;
-    let kind = a.path_kind.map_or(PathKind::Tour, Into::into);
-    generate(&graph, kind, a.legs, a.seed, 1.5, 90f32.to_radians())
-        .with_context(|| format!("{}: no live cells to walk through", a.db.display()))
+    a.route.load(|| {
+        let db = Database::open(&a.db)?;
+        db.cell_graph()?.with_context(|| {
+            format!(
+                "{}: built without cells; give a path file with --path",
+                a.db.display()
+            )
+        })
+    })
 }
 
 /// Runs the benchmark with a progress bar and prints the table.

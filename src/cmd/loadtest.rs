@@ -28,18 +28,8 @@ pub struct Args {
     /// Simulated clients.
     #[arg(long, default_value_t = 8)]
     clients: usize,
-    /// A path JSON file (from `portico path`).
-    #[arg(long, conflicts_with = "path_kind")]
-    path: Option<PathBuf>,
-    /// Or generate a standard path from the server's cells.
-    #[arg(long, value_enum)]
-    path_kind: Option<crate::cmd::path::Kind>,
-    /// Legs of a generated tour.
-    #[arg(long, default_value_t = 4)]
-    legs: usize,
-    /// Seed of a generated path.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    #[command(flatten)]
+    route: crate::cmd::path::PathArgs,
     /// Prefetch policy, e.g. depth=16,gran=object,range=direction,look=any,read=4m,size=16.
     #[arg(long, default_value = "")]
     policy: String,
@@ -100,14 +90,7 @@ pub fn run(a: Args) -> Result<()> {
     if !(1.0..=10_000.0).contains(&a.budget_ms) {
         anyhow::bail!("--budget-ms must be 1..=10000, not {}", a.budget_ms);
     }
-    let path = crate::cmd::walk::load_path(
-        &a.server,
-        a.token.clone(),
-        a.path.as_ref(),
-        a.path_kind.map(Into::into),
-        a.legs,
-        a.seed,
-    )?;
+    let path = crate::cmd::walk::load_path(&a.server, a.token.clone(), &a.route)?;
     if !a.stress.is_empty() {
         return stress(&a, path, policies[0].1);
     }

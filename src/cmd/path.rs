@@ -27,6 +27,53 @@ impl From<Kind> for PathKind {
     }
 }
 
+/// How `walk`, `loadtest` and `bench` get their observer path: a file from `portico path`, or
+/// a standard path generated from the model's cells.
+#[derive(clap::Args, Clone)]
+pub struct PathArgs {
+    /// A path JSON file (from `portico path`).
+    #[arg(long, conflicts_with = "path_kind")]
+    pub path: Option<PathBuf>,
+    /// Or generate a standard path from the model's cells.
+    #[arg(long, value_enum)]
+    pub path_kind: Option<Kind>,
+    /// Legs of a generated tour.
+    #[arg(long, default_value_t = 4)]
+    pub legs: usize,
+    /// Seed of a generated path.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+impl PathArgs {
+    /// The path file, checked; or, without one, a generated path through the cell graph that
+    /// `graph` fetches (from a server or a database).
+    pub fn load(
+        &self,
+        graph: impl FnOnce() -> Result<portico_data::cells::CellGraph>,
+    ) -> Result<portico_data::path::CameraPath> {
+        if let Some(f) = &self.path {
+            let text = std::fs::read(f).with_context(|| format!("reading {}", f.display()))?;
+            let p: portico_data::path::CameraPath = serde_json::from_slice(&text)
+                .with_context(|| format!("{}: not a path JSON", f.display()))?;
+            p.validate()
+                .map_err(anyhow::Error::msg)
+                .with_context(|| f.display().to_string())?;
+            return Ok(p);
+        }
+        let kind = self.path_kind.map_or(PathKind::Tour, Into::into);
+        generate(
+            &graph()?,
+            kind,
+            self.legs,
+            self.seed,
+            1.5,
+            90f32.to_radians(),
+        )
+        .context("the model has no live cells to walk through")
+    }
+}
+
 /// Arguments of `portico path`.
 #[derive(clap::Args)]
 pub struct Args {

@@ -7,7 +7,7 @@ use portico_client::elision::Algorithm;
 use portico_client::net::{Remote, cells_blocking};
 use portico_client::policy::parse_policy;
 use portico_client::walk::{WalkConfig, WalkSummary, walk};
-use portico_data::path::{CameraPath, PathKind, generate};
+use portico_data::path::CameraPath;
 use portico_protocol::Policy;
 use std::path::PathBuf;
 
@@ -20,18 +20,8 @@ pub struct Args {
     /// Bearer token (also read from PORTICO_TOKEN).
     #[arg(long, env = "PORTICO_TOKEN", hide_env_values = true)]
     token: Option<String>,
-    /// A path JSON file (from `portico path`).
-    #[arg(long, conflicts_with = "path_kind")]
-    path: Option<PathBuf>,
-    /// Or generate a standard path from the server's cells.
-    #[arg(long, value_enum)]
-    path_kind: Option<crate::cmd::path::Kind>,
-    /// Legs of a generated tour.
-    #[arg(long, default_value_t = 4)]
-    legs: usize,
-    /// Seed of a generated path.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
+    #[command(flatten)]
+    route: crate::cmd::path::PathArgs,
     /// Frame-time budget in milliseconds.
     #[arg(long, default_value_t = 50.0)]
     budget_ms: f64,
@@ -88,46 +78,18 @@ pub fn parse_size(s: &str) -> Result<(u32, u32)> {
     Ok((w, h))
 }
 
-/// Loads or generates the path.
+/// The path of a walk or load test: the file, or a standard path through the server's cells.
 pub fn load_path(
     server: &str,
     token: Option<String>,
-    file: Option<&PathBuf>,
-    kind: Option<PathKind>,
-    legs: usize,
-    seed: u64,
+    route: &crate::cmd::path::PathArgs,
 ) -> Result<CameraPath> {
-    if let Some(f) = file {
-        let text = std::fs::read(f).with_context(|| format!("reading {}", f.display()))?;
-        let p: CameraPath = serde_json::from_slice(&text)
-            .with_context(|| format!("{}: not a path JSON", f.display()))?;
-        p.validate()
-            .map_err(anyhow::Error::msg)
-            .with_context(|| f.display().to_string())?;
-        return Ok(p);
-    }
-    let graph = cells_blocking(&Remote::new(server, token)?)?;
-    generate(
-        &graph,
-        kind.unwrap_or(PathKind::Tour),
-        legs,
-        seed,
-        1.5,
-        90f32.to_radians(),
-    )
-    .context("the model has no live cells to walk through")
+    route.load(|| cells_blocking(&Remote::new(server, token)?))
 }
 
 /// Runs the walk with a progress bar and prints the summary.
 pub fn run(a: Args) -> Result<()> {
-    let path = load_path(
-        &a.server,
-        a.token.clone(),
-        a.path.as_ref(),
-        a.path_kind.map(Into::into),
-        a.legs,
-        a.seed,
-    )?;
+    let path = load_path(&a.server, a.token.clone(), &a.route)?;
     let policy = parse_policy(&a.policy, Policy::default()).map_err(anyhow::Error::msg)?;
     let cfg = WalkConfig {
         server: a.server,
