@@ -7,12 +7,14 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum DataError {
     /// The operating system refused a read, write, rename or map.
-    #[error("{}: {source}", path.display())]
+    // `error` is not a `#[source]`: the message already says it, and chained error printing
+    // (`{:#}`) would say it twice.
+    #[error("{}: {error}", path.display())]
     Io {
         /// The file involved.
         path: PathBuf,
         /// What the OS said.
-        source: std::io::Error,
+        error: std::io::Error,
     },
     /// The file does not start with the Portico magic bytes: it is some other kind of file.
     #[error("{}: not a Portico display database (bad magic bytes)", path.display())]
@@ -66,10 +68,10 @@ pub enum DataError {
 
 impl DataError {
     /// Wraps an I/O error with the path it concerns.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+    pub fn io(path: impl Into<PathBuf>, error: std::io::Error) -> Self {
         DataError::Io {
             path: path.into(),
-            source,
+            error,
         }
     }
 
