@@ -95,6 +95,8 @@ pub fn build_with(
         defs,
         instances,
         sources,
+        origin,
+        warnings: _,
     } = model;
     // Occluders come from the source meshes, before LOD optimisation reorders their triangles.
     let occluders = (!opts.no_cells).then(|| {
@@ -161,6 +163,7 @@ pub fn build_with(
         sources,
         flattened: opts.flatten,
         bounds,
+        origin,
         materials,
         objects,
         instances: records,

@@ -8,6 +8,7 @@
 
 pub mod bake;
 pub mod build;
+pub mod bulk;
 pub mod cells;
 pub mod error;
 pub mod format;

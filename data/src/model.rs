@@ -68,11 +68,23 @@ pub struct Model {
     pub instances: Vec<Instance>,
     /// The files it came from.
     pub sources: Vec<String>,
+    /// World position (metres, double precision) of the model's local origin: every coordinate
+    /// in the model is relative to it. Zero unless the source sits far from its own origin
+    /// (survey coordinates), see [`crate::bulk::local_origin`].
+    pub origin: [f64; 3],
+    /// What the importers noticed and worked around (one line each, without the file name).
+    pub warnings: Vec<String>,
 }
 
 impl Model {
-    /// Appends another model, renumbering its materials and definitions.
+    /// Appends another model, renumbering its materials and definitions and moving its
+    /// instances from its origin to this model's (the first model's origin wins).
     pub fn merge(&mut self, other: Model) {
+        if self.instances.is_empty() && self.defs.is_empty() {
+            self.origin = other.origin;
+        }
+        let shift = glam::DVec3::from(other.origin) - glam::DVec3::from(self.origin);
+        let shift = glam::DMat4::from_translation(shift);
         let mat_base = self.materials.len() as u32;
         let def_base = self.defs.len() as u32;
         self.materials.extend(other.materials);
@@ -84,9 +96,11 @@ impl Model {
             .extend(other.instances.into_iter().map(|mut i| {
                 i.def += def_base;
                 i.material += mat_base;
+                i.transform = (shift * i.transform.as_dmat4()).as_mat4();
                 i
             }));
         self.sources.extend(other.sources);
+        self.warnings.extend(other.warnings);
     }
 
     /// World-space bounds of every instance's finest LOD.

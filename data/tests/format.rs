@@ -82,6 +82,7 @@ fn model() -> Model {
         ],
         instances,
         sources: vec!["test.glb".into()],
+        ..Model::default()
     }
 }
 

@@ -50,8 +50,13 @@ pub fn run(a: Args) -> Result<()> {
     let t0 = Instant::now();
     let mut model = portico_data::model::Model::default();
     for path in &a.models {
-        model.merge(import_file(path)?);
+        let m = import_file(path)?;
+        for w in &m.warnings {
+            eprintln!("warning: {}: {w}", path.display());
+        }
+        model.merge(m);
     }
+    let origin = model.origin;
     let import_time = t0.elapsed();
     let bars = Bars::new();
     let opts = BuildOptions {
@@ -79,6 +84,12 @@ pub fn run(a: Args) -> Result<()> {
         report.lod_time.as_secs_f64(),
         report.write_time.as_secs_f64(),
     );
+    if origin != [0.0; 3] {
+        eprintln!(
+            "local origin: ({:.3}, {:.3}, {:.3}) m in the source's coordinates (kept in the database)",
+            origin[0], origin[1], origin[2]
+        );
+    }
     if !a.no_hierarchy {
         eprintln!(
             "impostors: {} in {:.2} s",

@@ -278,8 +278,9 @@ pub fn precompute(
     on_cell: &(dyn Fn() + Sync),
 ) -> Precomputed {
     let t0 = std::time::Instant::now();
-    let mut graph = subdivide::subdivide(bounds, &occluders.faces);
-    portals::find_portals(&mut graph, &occluders.faces, &occluders.solids);
+    let core = bulk_of(bounds, objects);
+    let mut graph = subdivide::subdivide_around(bounds, &core, &occluders.faces);
+    portals::find_portals_around(&mut graph, &core, &occluders.faces, &occluders.solids);
     let incidence = stab::incidence(&graph, objects);
     let subdivision_seconds = t0.elapsed().as_secs_f64();
     let t1 = std::time::Instant::now();
@@ -292,6 +293,26 @@ pub fn precompute(
         stats,
         subdivision_seconds,
         visibility_seconds: t1.elapsed().as_secs_f64(),
+    }
+}
+
+/// The part of `bounds` the model's bulk occupies ([`crate::bulk`]); `bounds` itself when the
+/// model has no strays.
+fn bulk_of(bounds: &Aabb, objects: &[Aabb]) -> Aabb {
+    let boxes: Vec<crate::bulk::DBox> = objects
+        .iter()
+        .map(|o| crate::bulk::DBox {
+            min: Vec3::from(o.min).as_dvec3(),
+            max: Vec3::from(o.max).as_dvec3(),
+        })
+        .collect();
+    let b = crate::bulk::bulk(&boxes);
+    if b.strays.is_empty() || b.bounds.is_empty() {
+        return *bounds;
+    }
+    Aabb {
+        min: std::array::from_fn(|k| (b.bounds.min[k] as f32).max(bounds.min[k])),
+        max: std::array::from_fn(|k| (b.bounds.max[k] as f32).min(bounds.max[k])),
     }
 }
 

@@ -24,6 +24,8 @@ use std::collections::HashMap;
 pub const AUTO_MIN_EXTENT: f32 = 2.0;
 /// Coordinates are snapped to this grid (metres) so that faces of neighbouring boxes coincide.
 pub const SNAP: f32 = 1e-3;
+/// `1 / SNAP`, exactly.
+const SNAPS_PER_METRE: f64 = 1000.0;
 
 /// The axis-aligned rectangular faces of a mesh (pairs of triangles filling a rectangle), as
 /// flat boxes in the mesh's coordinates.
@@ -39,10 +41,8 @@ pub fn faces(mesh: &Mesh) -> Vec<Aabb> {
         };
         let mut b = Aabb::EMPTY;
         p.iter().for_each(|q| b.include(*q));
-        let key: [i64; 6] = std::array::from_fn(|k| {
-            let x = if k < 3 { b.min[k] } else { b.max[k - 3] };
-            (x / SNAP).round() as i64
-        });
+        let key: [i64; 6] =
+            std::array::from_fn(|k| grid(if k < 3 { b.min[k] } else { b.max[k - 3] }));
         let area = (p[1] - p[0]).cross(p[2] - p[0]).length() * 0.5;
         *rects.entry((axis, key)).or_default() += area;
     }
@@ -50,8 +50,8 @@ pub fn faces(mesh: &Mesh) -> Vec<Aabb> {
         .into_iter()
         .filter_map(|((axis, k), area)| {
             let b = Aabb {
-                min: [0, 1, 2].map(|i| k[i] as f32 * SNAP),
-                max: [3, 4, 5].map(|i| k[i] as f32 * SNAP),
+                min: [0, 1, 2].map(|i| ungrid(k[i])),
+                max: [3, 4, 5].map(|i| ungrid(k[i])),
             };
             let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
             let full = (b.max[u] - b.min[u]) * (b.max[v] - b.min[v]);
@@ -144,8 +144,22 @@ pub fn transform_box(b: &Aabb, m: &Mat4) -> Option<Aabb> {
     })
 }
 
+/// The nearest point of the [`SNAP`] grid. Computed in f64 so that a grid point is the f32
+/// nearest to it: a wall at 123 m snaps to exactly 123.0, as the model's bounds have it (in f32,
+/// `123_000.0 * 0.001` is 123.00001, which leaves slivers of open space between walls and the
+/// bounds).
 fn snap(x: f32) -> f32 {
-    (x / SNAP).round() * SNAP
+    ungrid(grid(x))
+}
+
+/// Index of the [`SNAP`] grid point nearest to `x`.
+fn grid(x: f32) -> i64 {
+    (x as f64 * SNAPS_PER_METRE).round() as i64
+}
+
+/// The f32 nearest to grid point `k`.
+fn ungrid(k: i64) -> f32 {
+    (k as f64 / SNAPS_PER_METRE) as f32
 }
 
 /// The occluders of a model in world space.

@@ -8,18 +8,39 @@
 
 use super::{CellGraph, Portal, touches};
 use crate::geometry::Aabb;
-use std::collections::HashMap;
 
-/// Bucket size of the occluder lookup grid (metres).
-const BUCKET: f32 = 4.0;
 /// Ignore open slivers smaller than this (square metres).
 const MIN_AREA: f32 = 1e-6;
 
 /// Fills `graph.portals` and every live cell's portal list. Cells inside the `solids` are dead
 /// and get no portals; so do cells left without any.
 pub fn find_portals(graph: &mut CellGraph, occluders: &[Aabb], solids: &[Aabb]) {
+    let core = graph.bounds;
+    find_portals_around(graph, &core, occluders, solids);
+}
+
+/// [`find_portals`] for a subdivision whose `core` (the model's bulk) was cut out first
+/// ([`super::subdivide::subdivide_around`]). The cells outside the core are empty space around a
+/// stray object: liveness inside the core is decided by the core's own portals, as if nothing
+/// lay outside it (so walls and slabs at its edge stay dead), and an outside cell is live only
+/// when a live core cell opens onto it, directly or through other outside cells.
+pub fn find_portals_around(
+    graph: &mut CellGraph,
+    core: &Aabb,
+    occluders: &[Aabb],
+    solids: &[Aabb],
+) {
     let lookup = Buckets::new(occluders);
     let solid_lookup = Buckets::new(solids);
+    let outside: Vec<bool> = graph
+        .cells
+        .iter()
+        .map(|c| {
+            (0..3).any(|a| {
+                c.bounds.max[a] <= core.min[a] + 1e-5 || c.bounds.min[a] >= core.max[a] - 1e-5
+            })
+        })
+        .collect();
     for cell in &mut graph.cells {
         cell.live = !inside_solids(&cell.bounds, &solid_lookup, solids);
     }
@@ -64,19 +85,52 @@ pub fn find_portals(graph: &mut CellGraph, occluders: &[Aabb], solids: &[Aabb]) 
             }
         }
     }
+    // With a single cell there is nothing to connect; otherwise a core cell without portals to
+    // other core cells is sealed space (inside a wall or slab).
+    let cells = graph.cells.len();
+    let mut degree = vec![0usize; cells];
+    for p in portals
+        .iter()
+        .filter(|p| p.cells.iter().all(|&c| !outside[c as usize]))
+    {
+        p.cells.iter().for_each(|&c| degree[c as usize] += 1);
+    }
+    let core_cells = outside.iter().filter(|o| !**o).count();
+    for c in 0..cells {
+        if !outside[c] && core_cells > 1 && degree[c] == 0 {
+            graph.cells[c].live = false;
+        }
+    }
+    // Outside cells: live when reached from a live core cell.
+    if outside.iter().any(|&o| o) {
+        let mut reached: Vec<bool> = (0..cells)
+            .map(|c| !outside[c] && graph.cells[c].live)
+            .collect();
+        let mut changed = true;
+        while changed {
+            changed = false;
+            for p in &portals {
+                let [a, b] = p.cells.map(|c| c as usize);
+                if reached[a] != reached[b] && graph.cells[a].live && graph.cells[b].live {
+                    reached[a] = true;
+                    reached[b] = true;
+                    changed = true;
+                }
+            }
+        }
+        for c in 0..cells {
+            if outside[c] && !reached[c] {
+                graph.cells[c].live = false;
+            }
+        }
+    }
+    portals.retain(|p| p.cells.iter().all(|&c| graph.cells[c as usize].live));
     for (i, p) in portals.iter().enumerate() {
         for c in p.cells {
             graph.cells[c as usize].portals.push(i as u32);
         }
     }
     graph.portals = portals;
-    // With a single cell there is nothing to connect; otherwise a cell without portals is
-    // sealed space (inside a wall or slab).
-    if graph.cells.len() > 1 {
-        for cell in &mut graph.cells {
-            cell.live &= !cell.portals.is_empty();
-        }
-    }
 }
 
 /// Whether the box lies inside the union of the solids: its centre and its corners (pulled 10 %
@@ -163,43 +217,44 @@ pub fn open_rectangles(rect: &Aabb, axis: usize, blockers: &[Aabb]) -> Vec<Aabb>
         .collect()
 }
 
-/// A uniform grid of buckets over the occluders, for "which occluders are near this box".
+/// An R-tree over boxes, for "which boxes are near this box": its cost depends on the number of
+/// boxes, never on the extent of the model (a grid over the extent would grow with a far
+/// stray object).
 struct Buckets {
-    map: HashMap<(i32, i32, i32), Vec<u32>>,
+    tree:
+        rstar::RTree<rstar::primitives::GeomWithData<rstar::primitives::Rectangle<[f32; 3]>, u32>>,
 }
 
 impl Buckets {
     fn new(occluders: &[Aabb]) -> Self {
-        let mut map: HashMap<(i32, i32, i32), Vec<u32>> = HashMap::new();
-        for (i, o) in occluders.iter().enumerate() {
-            for key in keys(o) {
-                map.entry(key).or_default().push(i as u32);
-            }
+        let items = occluders
+            .iter()
+            .enumerate()
+            .map(|(i, o)| {
+                rstar::primitives::GeomWithData::new(
+                    rstar::primitives::Rectangle::from_corners(o.min, o.max),
+                    i as u32,
+                )
+            })
+            .collect();
+        Buckets {
+            tree: rstar::RTree::bulk_load(items),
         }
-        Buckets { map }
     }
 
     fn near(&self, q: &Aabb, occluders: &[Aabb]) -> Vec<Aabb> {
-        let mut ids: Vec<u32> = keys(q)
-            .filter_map(|k| self.map.get(&k))
-            .flatten()
-            .copied()
+        let grown = rstar::AABB::from_corners(q.min.map(|x| x - 1e-4), q.max.map(|x| x + 1e-4));
+        let mut ids: Vec<u32> = self
+            .tree
+            .locate_in_envelope_intersecting(&grown)
+            .map(|g| g.data)
             .collect();
         ids.sort_unstable();
-        ids.dedup();
         ids.into_iter()
             .map(|i| occluders[i as usize])
             .filter(|o| touches(o, q))
             .collect()
     }
-}
-
-fn keys(b: &Aabb) -> impl Iterator<Item = (i32, i32, i32)> {
-    let lo = b.min.map(|x| ((x - 1e-4) / BUCKET).floor() as i32);
-    let hi = b.max.map(|x| ((x + 1e-4) / BUCKET).floor() as i32);
-    (lo[0]..=hi[0]).flat_map(move |x| {
-        (lo[1]..=hi[1]).flat_map(move |y| (lo[2]..=hi[2]).map(move |z| (x, y, z)))
-    })
 }
 
 #[cfg(test)]

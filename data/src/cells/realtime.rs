@@ -67,7 +67,15 @@ pub struct Reached {
     pub wedge: Vec<Plane>,
 }
 
-/// Eye-to-cell visibility. Empty when the eye is outside every live cell.
+/// Most portal sequences one eye-to-cell search follows. The search is exponential in the worst
+/// case (an open grid of cells, where every cell sees every other through many sequences); past
+/// this bound it stops and falls back to [`frustum_reached`], so one frame or one prefetch
+/// request costs at most this many portal clips and this much memory, on any model.
+pub const MAX_EYE_SEQUENCES: usize = 20_000;
+
+/// Eye-to-cell visibility. Empty when the eye is outside every live cell. For a grid of open
+/// cells (a model without walls) portals cull nothing, and for a search past
+/// [`MAX_EYE_SEQUENCES`] they cost too much: both use [`frustum_reached`] instead.
 pub fn eye_to_cell(graph: &CellGraph, view: &Frustum) -> Vec<Reached> {
     let Some(start) = graph
         .locate(view.eye)
@@ -75,12 +83,20 @@ pub fn eye_to_cell(graph: &CellGraph, view: &Frustum) -> Vec<Reached> {
     else {
         return Vec::new();
     };
+    if graph.grid_fallback {
+        return frustum_reached(graph, view, start);
+    }
     let mut out = vec![Reached {
         cell: start,
         wedge: view.planes.clone(),
     }];
     let mut stack = vec![(start, view.planes.clone(), vec![start])];
+    let mut followed = 0usize;
     while let Some((cell, wedge, path)) = stack.pop() {
+        followed += 1;
+        if followed > MAX_EYE_SEQUENCES {
+            return frustum_reached(graph, view, start);
+        }
         for &p in &graph.cells[cell as usize].portals {
             let portal = &graph.portals[p as usize];
             let next = portal.other(cell);
@@ -120,6 +136,32 @@ pub fn eye_to_cell(graph: &CellGraph, view: &Frustum) -> Vec<Reached> {
             let mut next_path = path.clone();
             next_path.push(next);
             stack.push((next, narrowed, next_path));
+        }
+    }
+    out
+}
+
+/// The cells connected to `start` through portals by a chain of cells that all touch the view
+/// frustum, each seen through the whole frustum: every sightline from the eye inside the
+/// frustum passes only through such cells, so this is conservative, and it costs one visit per
+/// cell and portal.
+pub fn frustum_reached(graph: &CellGraph, view: &Frustum, start: u32) -> Vec<Reached> {
+    let mut seen = vec![false; graph.cells.len()];
+    seen[start as usize] = true;
+    let mut queue = std::collections::VecDeque::from([start]);
+    let mut out = Vec::new();
+    while let Some(cell) = queue.pop_front() {
+        out.push(Reached {
+            cell,
+            wedge: view.planes.clone(),
+        });
+        for &p in &graph.cells[cell as usize].portals {
+            let next = graph.portals[p as usize].other(cell);
+            let c = &graph.cells[next as usize];
+            if !seen[next as usize] && c.live && view.touches(&c.bounds) {
+                seen[next as usize] = true;
+                queue.push_back(next);
+            }
         }
     }
     out

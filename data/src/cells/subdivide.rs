@@ -8,6 +8,11 @@
 //! the space inside walls and slabs as cells with no portals (marked dead by `portals`).
 //!
 //! Without occluders the subdivision falls back to a regular grid of open cells.
+//!
+//! When the model has strays ([`crate::bulk`]), the first splits cut the root along the faces of
+//! the bulk: the space between the bulk and each stray becomes a few cells of its own, never
+//! split further, and only the bulk is subdivided. So the building keeps its cells however far
+//! a stray lies, and no step's cost grows with the distance.
 
 use super::{Cell, CellGraph, KdNode};
 use crate::geometry::Aabb;
@@ -29,6 +34,13 @@ const MAX_DEPTH: usize = 64;
 /// walls are simply portals to nowhere). Courtyards and other outside space inside the box
 /// are cells like any other.
 pub fn subdivide(bounds: &Aabb, occluders: &[Aabb]) -> CellGraph {
+    subdivide_around(bounds, bounds, occluders)
+}
+
+/// [`subdivide`] with the root `bounds` first cut along the faces of `core` (the model's bulk,
+/// inside `bounds`): the space outside `core` becomes at most six cells, and only `core` is
+/// subdivided further.
+pub fn subdivide_around(bounds: &Aabb, core: &Aabb, occluders: &[Aabb]) -> CellGraph {
     let root = *bounds;
     let mut graph = CellGraph {
         bounds: root,
@@ -41,8 +53,14 @@ pub fn subdivide(bounds: &Aabb, occluders: &[Aabb]) -> CellGraph {
     // Explicit stack of (tree node index, box, occluders overlapping it, depth).
     let mut stack = vec![(0usize, root, all, 0usize)];
     while let Some((node, b, ids, depth)) = stack.pop() {
-        let split = if graph.grid_fallback {
-            grid_split(&b, &root)
+        let outside = !super::touches(&b, core)
+            || (0..3).any(|a| b.max[a] <= core.min[a] || b.min[a] >= core.max[a]);
+        let split = if outside {
+            None
+        } else if let Some(cut) = isolate(&b, core) {
+            Some(cut)
+        } else if graph.grid_fallback {
+            grid_split(&b, core)
         } else if depth < MAX_DEPTH {
             best_split(&b, &ids, occluders)
         } else {
@@ -119,6 +137,20 @@ fn best_split(b: &Aabb, ids: &[u32], occluders: &[Aabb]) -> Option<(usize, f32)>
         })
         .max_by_key(|&(c, bal, axis, bits, _)| (c, bal, std::cmp::Reverse(axis), bits))
         .map(|(_, _, axis, _, at)| (axis, at))
+}
+
+/// The first face of `core` that lies strictly inside `b`, as a split: cuts the space around
+/// the bulk away from it.
+fn isolate(b: &Aabb, core: &Aabb) -> Option<(usize, f32)> {
+    (0..3).find_map(|a| {
+        if core.min[a] > b.min[a] + MIN_THICKNESS {
+            Some((a, core.min[a]))
+        } else if core.max[a] < b.max[a] - MIN_THICKNESS {
+            Some((a, core.max[a]))
+        } else {
+            None
+        }
+    })
 }
 
 /// Grid fallback: halve the longest axis until cells are small enough.
@@ -212,6 +244,27 @@ pub(crate) mod tests {
         assert!(g.grid_fallback);
         assert!(g.cells.len() >= 16, "{} cells", g.cells.len());
         assert!(g.cells.iter().all(|c| c.live));
+    }
+
+    #[test]
+    fn a_far_core_is_cut_out_first_and_subdivided_alone() {
+        let walls = faces_of(&[bx([5.0, 0.0, 0.0], [5.2, 3.0, 4.0])]);
+        let core = bx([0.0; 3], [10.0, 3.0, 4.0]);
+        let far = subdivide_around(&bx([0.0; 3], [3000.0, 3000.0, 3000.0]), &core, &walls);
+        let near = subdivide(&core, &walls);
+        // The same cells inside the core, plus one cell per side the root extends past it.
+        assert_eq!(far.cells.len(), near.cells.len() + 3);
+        for c in &near.cells {
+            let p = c.bounds.center();
+            assert_eq!(far.cells[far.locate(p).unwrap() as usize].bounds, c.bounds);
+        }
+        // Without a core inside, no split at all is made outside it.
+        let stray = far.locate(glam::Vec3::splat(2990.0)).unwrap();
+        assert!(
+            far.cells[stray as usize].bounds.min[0] >= 10.0 - 1e-3
+                || far.cells[stray as usize].bounds.min[1] >= 3.0 - 1e-3
+                || far.cells[stray as usize].bounds.min[2] >= 4.0 - 1e-3
+        );
     }
 
     #[test]

@@ -15,8 +15,12 @@ pub struct Header {
     pub sources: Vec<String>,
     /// Whether instances carry their own baked geometry (`portico build --flatten`).
     pub flattened: bool,
-    /// World-space bounds of the whole model.
+    /// Bounds of the whole model, relative to `origin`.
     pub bounds: Aabb,
+    /// Where the model's local origin lies in the source's coordinates (metres, double
+    /// precision): add it to any position to place the model back in the world (survey
+    /// coordinates). Zero for models built near their own origin.
+    pub origin: [f64; 3],
     /// Materials (index 0 is the default).
     pub materials: Vec<Material>,
     /// Object definitions.

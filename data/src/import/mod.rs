@@ -1,10 +1,13 @@
 //! Importers: Wavefront OBJ+MTL (`tobj`) and glTF 2.0 / GLB (`gltf`), chosen by file extension.
 //!
 //! Both produce a [`Model`]: definitions shared by instances, vertex colours with the material's
-//! base colour already multiplied in, and node tags (`extras`) carried through.
+//! base colour already multiplied in, node tags (`extras`) carried through, coordinates relative
+//! to a local origin kept in double precision, and the warnings of what was worked around.
+//! Neither can panic on a file: bad input is one error line naming the file and the element
+//! (mesh, primitive, accessor, node, or OBJ line).
 
-mod gltf;
-mod obj;
+pub mod gltf;
+pub mod obj;
 
 use crate::error::{DataError, Result};
 use crate::geometry::{Mesh, Vertex};
@@ -39,8 +42,19 @@ pub fn import_file(path: &Path) -> Result<Model> {
     Ok(model)
 }
 
+/// Imports model bytes without touching the file system (no external buffers or material
+/// libraries): `ext` is `obj`, `gltf` or `glb`. For fuzzing and tests.
+pub fn import_bytes(bytes: &[u8], ext: &str) -> std::result::Result<Model, String> {
+    match ext {
+        "obj" => obj::import_slice(bytes, None),
+        "gltf" | "glb" => gltf::import_slice(bytes, None),
+        other => Err(format!("unsupported model format '.{other}'")),
+    }
+}
+
 /// Builds a mesh from float streams, validating indices and filling in missing normals with
-/// area-weighted vertex normals.
+/// area-weighted vertex normals. A vertex whose given normal is not a finite, non-zero vector
+/// (exporters write `nan nan nan` for degenerate faces) gets the computed one.
 pub fn mesh_from_streams(
     positions: &[[f32; 3]],
     normals: Option<&[[f32; 3]]>,
@@ -64,7 +78,17 @@ pub fn mesh_from_streams(
     }
     let computed;
     let normals = match normals {
-        Some(n) if n.len() == positions.len() => n,
+        Some(n) if n.len() == positions.len() && n.iter().all(usable_normal) => n,
+        Some(n) if n.len() == positions.len() => {
+            let mut fixed = vertex_normals(positions, &indices);
+            for (f, given) in fixed.iter_mut().zip(n) {
+                if usable_normal(given) {
+                    *f = *given;
+                }
+            }
+            computed = fixed;
+            &computed
+        }
         _ => {
             computed = vertex_normals(positions, &indices);
             &computed
@@ -79,6 +103,11 @@ pub fn mesh_from_streams(
         })
         .collect();
     Ok(Mesh { vertices, indices })
+}
+
+/// Whether a given normal can be used: finite and not (nearly) zero.
+fn usable_normal(n: &[f32; 3]) -> bool {
+    n.iter().all(|x| x.is_finite()) && Vec3::from(*n).length_squared() > 1e-12
 }
 
 /// Area-weighted vertex normals for meshes that come without any.
@@ -117,6 +146,17 @@ mod tests {
         let m = mesh_from_streams(&p, None, &[], vec![0, 1, 2]).expect("mesh");
         let n = m.vertices[0].normal_f32();
         assert!((n - Vec3::Y).length() < 0.02, "{n}");
+    }
+
+    #[test]
+    fn nan_and_zero_normals_are_replaced_by_computed_ones() {
+        let p = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, -1.0]];
+        let n = [[f32::NAN; 3], [0.0; 3], [1.0, 0.0, 0.0]];
+        let m = mesh_from_streams(&p, Some(&n), &[], vec![0, 1, 2]).expect("mesh");
+        for (i, want) in [Vec3::Y, Vec3::Y, Vec3::X].into_iter().enumerate() {
+            let got = m.vertices[i].normal_f32();
+            assert!((got - want).length() < 0.02, "vertex {i}: {got}");
+        }
     }
 
     #[test]

@@ -1,0 +1,557 @@
+//! glTF 2.0 / GLB import.
+//!
+//! The `gltf` crate parses and cross-checks the JSON (every index in range); everything read from
+//! the buffers goes through [`accessor`], which checks each accessor before reading it, so a
+//! broken file is refused with one line naming its mesh, primitive and accessor, never a panic.
+//!
+//! - Shared definitions: one glTF mesh used by several nodes becomes one definition with several
+//!   instances (Funkhouser §3.1). A node's `MSFT_lod` extension (`{"ids": [node, ...]}`, coarser
+//!   and coarser) gives the definition's lower LODs; the generator writes its LODs that way.
+//! - Geometry as real exporters write it: triangle lists, strips and fans; `KHR_mesh_quantization`
+//!   (dequantised) and `EXT_meshopt_compression` (decoded, [`buffers`]); sparse accessors; morph
+//!   targets at their default weights; skinned meshes placed by their skeleton's rest pose (glTF
+//!   §3.7.3: the skinned node's own transform is ignored). Draco and glTF 1.0 are refused.
+//! - Coordinates in double precision: node transforms are read from the JSON as f64 and composed
+//!   in f64; the model moves to a local origin ([`crate::bulk::local_origin`]) kept in
+//!   [`Model::origin`]; objects far from the bulk are named in a warning.
+//! - Node `extras`: `occluder: true` marks structural occluders; every other scalar is a tag.
+//! - Vertex colour = `COLOR_0` × the primitive's base colour factor.
+
+mod accessor;
+mod buffers;
+mod primitive;
+
+use super::concat;
+use crate::bulk::{DBox, MAX_COORDINATE, bulk, local_origin};
+use crate::error::{DataError, Result};
+use crate::geometry::Mesh;
+use crate::model::{Instance, Material, Model, ObjectDef};
+use ::gltf::json;
+use accessor::{Accessors, Semantic};
+use buffers::{Buffers, Views};
+use glam::{DMat4, DQuat, DVec3, DVec4, Vec3};
+use json::validation::Validate;
+use serde_json::Value;
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+
+/// Deepest node hierarchy we follow; deeper means a malformed file.
+const MAX_DEPTH: usize = 256;
+
+/// Extensions whose data this importer decodes.
+const DECODED: &[&str] = &["KHR_mesh_quantization", buffers::MESHOPT];
+
+/// Imports a `.gltf` (with external or embedded buffers) or `.glb` file. Errors name the file
+/// and the element at fault.
+pub fn import(path: &Path) -> Result<Model> {
+    let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
+    import_slice(&bytes, path.parent()).map_err(|e| DataError::import(path, e))
+}
+
+/// Imports glTF or GLB bytes; external buffers are read from `base` (refused when `None`).
+/// The error is one line naming the element at fault (without the file name).
+pub fn import_slice(bytes: &[u8], base: Option<&Path>) -> Result<Model, String> {
+    if bytes.starts_with(b"glTF") && bytes.get(4..8) == Some(&1u32.to_le_bytes()[..]) {
+        return Err(
+            "binary glTF 1.0 is not supported (only glTF 2.0); convert it, e.g. with Blender"
+                .into(),
+        );
+    }
+    let (json_bytes, blob) = if bytes.starts_with(b"glTF") {
+        let glb = ::gltf::Glb::from_slice(bytes).map_err(|e| format!("GLB container: {e}"))?;
+        (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
+    } else {
+        (bytes.to_vec(), None)
+    };
+    let raw: Value = serde_json::from_slice(&json_bytes).map_err(|e| format!("glTF JSON: {e}"))?;
+    match raw["asset"]["version"].as_str() {
+        Some(v) if v.starts_with("2.") => {}
+        Some(v) => {
+            return Err(format!(
+                "glTF {v} is not supported (only glTF 2.0); convert it, e.g. with Blender or gltf-pipeline"
+            ));
+        }
+        None => {
+            return Err(
+                "not glTF 2.0: asset.version is missing (glTF 1.0?); convert it, e.g. with Blender"
+                    .into(),
+            );
+        }
+    }
+    let root: json::Root = serde_json::from_slice(&json_bytes).map_err(|e| format!("glTF: {e}"))?;
+    let mut warnings = check(&root)?;
+    let buffers = Buffers::load(&root, &raw, base, blob)?;
+    let views = Views::new(&root, &raw, buffers);
+    let quantization = root
+        .extensions_used
+        .iter()
+        .any(|e| e == "KHR_mesh_quantization");
+    let mut imp = Importer {
+        root: &root,
+        raw: &raw,
+        acc: Accessors::new(&root, &views, quantization),
+        model: Model::default(),
+        defs: HashMap::new(),
+    };
+    imp.model.materials = materials(&root);
+    imp.run(&mut warnings)?;
+    if !imp.acc.undeclared_quantization.is_empty() {
+        warnings.push(format!(
+            "accessors {:?} are quantised but KHR_mesh_quantization is not declared; read as the extension says",
+            imp.acc.undeclared_quantization
+        ));
+    }
+    imp.model.warnings.extend(warnings);
+    Ok(imp.model)
+}
+
+/// The `gltf` crate's cross-checks (indices in range, enum values known) and the required
+/// extensions; returns warnings for required extensions that only affect looks.
+fn check(root: &json::Root) -> Result<Vec<String>, String> {
+    if root
+        .extensions_used
+        .iter()
+        .any(|e| e == "KHR_draco_mesh_compression")
+    {
+        return Err("meshes compressed with Draco (KHR_draco_mesh_compression) are not supported; \
+             re-export without Draco, or recompress with gltfpack (EXT_meshopt_compression is supported)"
+            .into());
+    }
+    let mut errors = Vec::new();
+    root.validate(root, json::Path::new, &mut |path, e| {
+        let path = path().to_string();
+        // Required extensions are judged below, not by the crate's list; accessor min and max
+        // are optional to us (bounds come from the data).
+        let bounds = path.ends_with(".min") || path.ends_with(".max");
+        if e != json::validation::Error::Unsupported
+            && !(bounds && e == json::validation::Error::Missing)
+        {
+            errors.push(format!("{path}: {e}"));
+        }
+    });
+    if let Some(first) = errors.first() {
+        let more = match errors.len() {
+            1 => String::new(),
+            n => format!(" (and {} more)", n - 1),
+        };
+        return Err(format!("invalid glTF: {first}{more}"));
+    }
+    let mut warnings = Vec::new();
+    for ext in &root.extensions_required {
+        if DECODED.contains(&ext.as_str()) {
+            continue;
+        }
+        let looks = [
+            "KHR_materials_",
+            "KHR_texture_",
+            "EXT_texture_",
+            "KHR_lights_",
+        ];
+        if looks.iter().any(|p| ext.starts_with(p)) {
+            warnings.push(format!(
+                "required extension {ext} is ignored: geometry is right, materials may look different"
+            ));
+            continue;
+        }
+        return Err(format!("required extension {ext} is not supported"));
+    }
+    Ok(warnings)
+}
+
+/// The material table: index 0 is a default white, glTF material `i` is at `i + 1`.
+fn materials(root: &json::Root) -> Vec<Material> {
+    let mut out = vec![Material::default()];
+    out.extend(root.materials.iter().map(|m| Material {
+        name: m.name.clone().unwrap_or_default(),
+        base_color: m.pbr_metallic_roughness.base_color_factor.0,
+        texture: None,
+    }));
+    out
+}
+
+/// An instance before the model is moved to its local origin.
+struct Placed {
+    node: usize,
+    def: u32,
+    world: DMat4,
+}
+
+struct Importer<'a> {
+    root: &'a json::Root,
+    raw: &'a Value,
+    acc: Accessors<'a>,
+    model: Model,
+    /// (mesh, LOD meshes, morph weights' bits) → definition.
+    defs: HashMap<(usize, Vec<usize>, Vec<u32>), u32>,
+}
+
+impl Importer<'_> {
+    fn run(&mut self, warnings: &mut Vec<String>) -> Result<(), String> {
+        let order = self.scene_order(warnings)?;
+        let mut world: Vec<Option<DMat4>> = vec![None; self.root.nodes.len()];
+        for &(n, parent) in &order {
+            let base = parent.and_then(|p| world[p]).unwrap_or(DMat4::IDENTITY);
+            world[n] = Some(base * self.local_transform(n)?);
+        }
+        let mut placed = Vec::new();
+        for &(n, _) in &order {
+            let node = &self.root.nodes[n];
+            let (Some(mesh), Some(w)) = (node.mesh, world[n]) else {
+                continue;
+            };
+            let at = |e: String| format!("node {n}{}: {e}", name_of(&node.name));
+            let p = match node.skin {
+                Some(skin) => self
+                    .skinned(n, mesh.value(), skin.value(), &world)
+                    .map_err(at)?,
+                None => {
+                    let def = self.definition(n, mesh.value()).map_err(at)?;
+                    Placed {
+                        node: n,
+                        def,
+                        world: w,
+                    }
+                }
+            };
+            placed.push(p);
+        }
+        self.place(placed, warnings)
+    }
+
+    /// Reachable nodes in depth-first order with their parents. glTF requires the nodes to form
+    /// a forest (§3.5.3): a node with two parents or a scene root with a parent is refused, so
+    /// no file can make the walk loop or blow up.
+    fn scene_order(
+        &self,
+        warnings: &mut Vec<String>,
+    ) -> Result<Vec<(usize, Option<usize>)>, String> {
+        let nodes = &self.root.nodes;
+        let mut parent: Vec<Option<usize>> = vec![None; nodes.len()];
+        for (i, n) in nodes.iter().enumerate() {
+            for c in n.children.iter().flatten() {
+                let c = c.value();
+                if parent[c].replace(i).is_some() || c == i {
+                    return Err(format!(
+                        "node {c} has more than one parent (glTF nodes form trees)"
+                    ));
+                }
+            }
+        }
+        let roots: Vec<usize> = match self
+            .root
+            .scene
+            .or_else(|| (!self.root.scenes.is_empty()).then(|| json::Index::new(0)))
+        {
+            Some(s) => self.root.scenes[s.value()]
+                .nodes
+                .iter()
+                .map(|n| n.value())
+                .collect(),
+            None => {
+                warnings.push("the file has no scene: every root node is used".into());
+                (0..nodes.len()).filter(|&i| parent[i].is_none()).collect()
+            }
+        };
+        let mut order = Vec::new();
+        let mut stack: Vec<(usize, Option<usize>, usize)> = Vec::new();
+        for &r in roots.iter().rev() {
+            if parent[r].is_some() {
+                return Err(format!("scene root node {r} is also another node's child"));
+            }
+            stack.push((r, None, 0));
+        }
+        while let Some((n, p, depth)) = stack.pop() {
+            if depth > MAX_DEPTH {
+                return Err(format!("node {n}: hierarchy deeper than {MAX_DEPTH}"));
+            }
+            order.push((n, p));
+            for c in nodes[n].children.iter().flatten().rev() {
+                stack.push((c.value(), Some(n), depth + 1));
+            }
+        }
+        Ok(order)
+    }
+
+    /// A node's local transform in double precision, read from the JSON (the `gltf` crate
+    /// keeps only f32, which loses centimetres at survey coordinates).
+    fn local_transform(&self, n: usize) -> Result<DMat4, String> {
+        let node = &self.raw["nodes"][n];
+        let name = name_of(&self.root.nodes[n].name);
+        let nums = |key: &str, len: usize| -> Result<Option<Vec<f64>>, String> {
+            match &node[key] {
+                Value::Null => Ok(None),
+                Value::Array(a) if a.len() == len => a
+                    .iter()
+                    .map(|v| v.as_f64().filter(|x| x.is_finite()))
+                    .collect::<Option<Vec<f64>>>()
+                    .map(Some)
+                    .ok_or_else(|| format!("node {n}{name}: '{key}' holds a non-finite number")),
+                _ => Err(format!("node {n}{name}: '{key}' is not {len} numbers")),
+            }
+        };
+        let m = if let Some(m) = nums("matrix", 16)? {
+            DMat4::from_cols_slice(&m)
+        } else {
+            let t = nums("translation", 3)?.map_or(DVec3::ZERO, |v| DVec3::from_slice(&v));
+            let r = match nums("rotation", 4)? {
+                None => DQuat::IDENTITY,
+                Some(v) => DQuat::from_vec4(
+                    DVec4::from_slice(&v)
+                        .try_normalize()
+                        .ok_or_else(|| format!("node {n}{name}: rotation is not a quaternion"))?,
+                ),
+            };
+            let s = nums("scale", 3)?.map_or(DVec3::ONE, |v| DVec3::from_slice(&v));
+            DMat4::from_scale_rotation_translation(s, r, t)
+        };
+        let t = m.w_axis.truncate();
+        if t.abs().max_element() > MAX_COORDINATE {
+            return Err(format!(
+                "node {n}{name}: translation ({:e}, {:e}, {:e}) m is beyond ±{MAX_COORDINATE:e} m, not a building's coordinate",
+                t.x, t.y, t.z
+            ));
+        }
+        Ok(m)
+    }
+
+    /// The definition for a plain mesh node, created on first use.
+    fn definition(&mut self, n: usize, mesh: usize) -> Result<u32, String> {
+        let lods = self.lod_meshes(n)?;
+        let weights = self.morph_weights(n, mesh);
+        let key = (mesh, lods, weights.iter().map(|w| w.to_bits()).collect());
+        if let Some(&d) = self.defs.get(&key) {
+            return Ok(d);
+        }
+        let mut levels = vec![self.mesh(mesh, &weights, None)?];
+        for &l in &key.1 {
+            levels.push(self.mesh(l, &self.morph_weights(n, l), None)?);
+        }
+        let d = self.push_def(mesh, levels);
+        self.defs.insert(key, d);
+        Ok(d)
+    }
+
+    fn push_def(&mut self, mesh: usize, lods: Vec<Mesh>) -> u32 {
+        let m = &self.root.meshes[mesh];
+        let material = m
+            .primitives
+            .first()
+            .and_then(|p| p.material)
+            .map_or(0, |i| i.value() as u32 + 1);
+        self.model.defs.push(ObjectDef {
+            name: m.name.clone().unwrap_or_else(|| format!("mesh{mesh}")),
+            lods,
+            material,
+        });
+        self.model.defs.len() as u32 - 1
+    }
+
+    /// Morph target weights: the node's, else the mesh's defaults (glTF §3.7.2.2).
+    fn morph_weights(&self, n: usize, mesh: usize) -> Vec<f32> {
+        self.root.nodes[n]
+            .weights
+            .clone()
+            .or_else(|| self.root.meshes[mesh].weights.clone())
+            .unwrap_or_default()
+    }
+
+    /// Mesh indices of the node's `MSFT_lod` levels, coarser and coarser.
+    fn lod_meshes(&self, n: usize) -> Result<Vec<usize>, String> {
+        let ext = &self.raw["nodes"][n]["extensions"]["MSFT_lod"];
+        if ext.is_null() {
+            return Ok(Vec::new());
+        }
+        let ids = ext["ids"]
+            .as_array()
+            .ok_or_else(|| "MSFT_lod without an 'ids' array".to_string())?;
+        ids.iter()
+            .map(|id| {
+                let node = id
+                    .as_u64()
+                    .and_then(|i| self.root.nodes.get(i as usize))
+                    .ok_or_else(|| format!("MSFT_lod id {id} is not a node"))?;
+                node.mesh
+                    .map(|m| m.value())
+                    .ok_or_else(|| format!("MSFT_lod node {id} has no mesh"))
+            })
+            .collect()
+    }
+
+    /// A skinned node: its mesh skinned at the skeleton's rest pose (joint matrix = joint world
+    /// transform × inverse bind matrix, glTF §3.7.3), expressed relative to the first joint,
+    /// which becomes the instance's transform. The node's own transform is ignored, as glTF says.
+    fn skinned(
+        &mut self,
+        n: usize,
+        mesh: usize,
+        skin: usize,
+        world: &[Option<DMat4>],
+    ) -> Result<Placed, String> {
+        let s = &self.root.skins[skin];
+        let joints: Vec<DMat4> = s
+            .joints
+            .iter()
+            .map(|j| {
+                world[j.value()].ok_or_else(|| {
+                    format!("skin {skin}: joint node {} is not in the scene", j.value())
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        let anchor = *joints
+            .first()
+            .ok_or_else(|| format!("skin {skin} has no joints"))?;
+        let ibm: Vec<DMat4> = match s.inverse_bind_matrices {
+            Some(a) => {
+                let (m, _) = self.acc.floats(a.value(), Semantic::InverseBind)?;
+                m.chunks_exact(16)
+                    .map(|c| DMat4::from_cols_array(&std::array::from_fn(|k| c[k] as f64)))
+                    .collect()
+            }
+            None => vec![DMat4::IDENTITY; joints.len()],
+        };
+        if ibm.len() < joints.len() {
+            return Err(format!(
+                "skin {skin}: {} inverse bind matrices for {} joints",
+                ibm.len(),
+                joints.len()
+            ));
+        }
+        let to_anchor = anchor.inverse();
+        let matrices: Vec<DMat4> = joints
+            .iter()
+            .zip(&ibm)
+            .map(|(j, b)| to_anchor * *j * *b)
+            .collect();
+        let weights = self.morph_weights(n, mesh);
+        let lod = self.mesh(mesh, &weights, Some(&matrices))?;
+        let def = self.push_def(mesh, vec![lod]);
+        Ok(Placed {
+            node: n,
+            def,
+            world: anchor,
+        })
+    }
+
+    /// All triangle primitives of a mesh, concatenated; `skin` holds joint matrices for a
+    /// skinned mesh.
+    fn mesh(
+        &mut self,
+        mesh: usize,
+        weights: &[f32],
+        skin: Option<&[DMat4]>,
+    ) -> Result<Mesh, String> {
+        let mut parts = Vec::new();
+        let name = name_of(&self.root.meshes[mesh].name);
+        for p in 0..self.root.meshes[mesh].primitives.len() {
+            if let Some(part) =
+                primitive::primitive(self.root, &mut self.acc, mesh, p, weights, skin)
+                    .map_err(|e| format!("mesh {mesh}{name} primitive {p}: {e}"))?
+            {
+                parts.push(part);
+            }
+        }
+        Ok(concat(parts))
+    }
+
+    /// Moves the instances to the model's local origin and names the strays.
+    fn place(&mut self, placed: Vec<Placed>, warnings: &mut Vec<String>) -> Result<(), String> {
+        let mut boxes = Vec::with_capacity(placed.len());
+        for p in &placed {
+            let local = self.model.defs[p.def as usize].lods[0].bounds();
+            let mut b = DBox::EMPTY;
+            if !local.is_empty() {
+                for i in 0..8 {
+                    let corner = Vec3::new(
+                        if i & 1 == 0 {
+                            local.min[0]
+                        } else {
+                            local.max[0]
+                        },
+                        if i & 2 == 0 {
+                            local.min[1]
+                        } else {
+                            local.max[1]
+                        },
+                        if i & 4 == 0 {
+                            local.min[2]
+                        } else {
+                            local.max[2]
+                        },
+                    );
+                    b.include(p.world.transform_point3(corner.as_dvec3()));
+                }
+            }
+            let far = b.min.abs().max(b.max.abs()).max_element();
+            if !b.is_empty() && (far.is_nan() || far > MAX_COORDINATE) {
+                let node = &self.root.nodes[p.node];
+                return Err(format!(
+                    "node {}{}: its mesh reaches {far:e} m from the origin, beyond ±{MAX_COORDINATE:e} m",
+                    p.node,
+                    name_of(&node.name)
+                ));
+            }
+            boxes.push(b);
+        }
+        let bulk = bulk(&boxes);
+        for &s in &bulk.strays {
+            let node = &self.root.nodes[placed[s].node];
+            warnings.push(format!(
+                "node {}{} lies {:.0} m from the rest of the model: it gets a cell of its own",
+                placed[s].node,
+                name_of(&node.name),
+                boxes[s].distance(&bulk.bounds)
+            ));
+        }
+        let origin = local_origin(&bulk.bounds);
+        self.model.origin = origin.to_array();
+        let shift = DMat4::from_translation(-origin);
+        for p in placed {
+            let node = &self.root.nodes[p.node];
+            let (occluder, tags) =
+                extras(&node.extras).map_err(|e| format!("node {}: {e}", p.node))?;
+            self.model.instances.push(Instance {
+                name: node
+                    .name
+                    .clone()
+                    .unwrap_or_else(|| format!("node{}", p.node)),
+                def: p.def,
+                transform: (shift * p.world).as_mat4(),
+                material: self.model.defs[p.def as usize].material,
+                occluder,
+                tags,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// `" 'name'"` for messages, or nothing.
+fn name_of(name: &Option<String>) -> String {
+    name.as_deref().map_or(String::new(), |n| format!(" '{n}'"))
+}
+
+/// Reads a node's `extras`: the `occluder` flag and every other scalar as a tag.
+fn extras(raw: &json::Extras) -> Result<(bool, BTreeMap<String, String>), String> {
+    let Some(raw) = raw else {
+        return Ok((false, BTreeMap::new()));
+    };
+    let value: Value =
+        serde_json::from_str(raw.get()).map_err(|e| format!("extras are not JSON: {e}"))?;
+    let mut tags = BTreeMap::new();
+    let mut occluder = false;
+    if let Some(map) = value.as_object() {
+        for (k, v) in map {
+            match (k.as_str(), v) {
+                ("occluder", Value::Bool(b)) => occluder = *b,
+                (_, Value::String(s)) => {
+                    tags.insert(k.clone(), s.clone());
+                }
+                (_, Value::Number(_) | Value::Bool(_)) => {
+                    tags.insert(k.clone(), v.to_string());
+                }
+                _ => {}
+            }
+        }
+    }
+    Ok((occluder, tags))
+}

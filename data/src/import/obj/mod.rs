@@ -1,0 +1,218 @@
+//! Wavefront OBJ + MTL import through `tobj`: every OBJ object/group (per material) becomes one
+//! definition with one instance (OBJ has no instancing).
+//!
+//! The text first goes through [`text`] (encodings, continuations, lenient numbers, unnamed
+//! materials); `tobj` then parses it one line at a time from a reader that counts lines, so any
+//! error it reports names the source line. Positions are read in double precision and moved to
+//! the model's local origin ([`crate::bulk::local_origin`]): survey coordinates keep their
+//! millimetres. A material library that is missing or unreadable costs only colours (warned).
+
+pub mod text;
+
+use super::mesh_from_streams;
+use crate::bulk::{DBox, bulk, local_origin};
+use crate::error::{DataError, Result};
+use crate::model::{Instance, Material, Model, ObjectDef};
+use glam::{DVec3, Mat4};
+use std::io::{BufRead, Read};
+use std::path::Path;
+
+/// Imports an OBJ file (and its MTL library when it loads; a missing MTL only loses colours).
+pub fn import(path: &Path) -> Result<Model> {
+    let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
+    import_slice(&bytes, path.parent()).map_err(|e| DataError::import(path, e))
+}
+
+/// Imports OBJ bytes; material libraries are read from `base` (none when `None`). The error is
+/// one line naming the source line at fault.
+pub fn import_slice(bytes: &[u8], base: Option<&Path>) -> Result<Model, String> {
+    let (src, encoding) = text::decode(bytes);
+    let norm = text::obj(&src)?;
+    let mut warnings = Vec::new();
+    if let Some(e) = encoding {
+        warnings.push(format!("read as {e}"));
+    }
+    warnings.extend(norm.warnings.iter().cloned());
+    let opts = tobj::LoadOptions {
+        single_index: true,
+        triangulate: true,
+        ignore_points: true,
+        ignore_lines: true,
+    };
+    let mut reader = LineReader::new(norm.text.as_bytes());
+    let mtl_warnings = std::cell::RefCell::new(Vec::new());
+    let loaded = tobj::load_obj_buf(&mut reader, &opts, |lib| {
+        let Some(dir) = base else {
+            return Err(tobj::LoadError::OpenFileFailed);
+        };
+        let file = dir.join(lib);
+        let bytes = std::fs::read(&file).map_err(|e| {
+            mtl_warnings
+                .borrow_mut()
+                .push(format!("{}: {e}; materials are white", file.display()));
+            tobj::LoadError::OpenFileFailed
+        })?;
+        let m = text::mtl(&text::decode(&bytes).0);
+        mtl_warnings.borrow_mut().extend(
+            m.warnings
+                .iter()
+                .map(|w| format!("{}: {w}", file.display())),
+        );
+        tobj::load_mtl_buf(&mut m.text.as_bytes()).inspect_err(|e| {
+            mtl_warnings
+                .borrow_mut()
+                .push(format!("{}: {e}; materials are white", file.display()));
+        })
+    });
+    let (models, mtl) = loaded.map_err(|e| format!("line {}: {e}", norm.line(reader.line)))?;
+    warnings.extend(mtl_warnings.into_inner());
+    let mtl = mtl.unwrap_or_default();
+    let mut model = Model {
+        materials: vec![Material::default()],
+        ..Model::default()
+    };
+    model.materials.extend(mtl.iter().map(|m| Material {
+        name: m.name.clone(),
+        base_color: m.diffuse.map_or([1.0; 4], |d| {
+            [
+                d[0] as f32,
+                d[1] as f32,
+                d[2] as f32,
+                m.dissolve.unwrap_or(1.0) as f32,
+            ]
+        }),
+        texture: None,
+    }));
+    // Positions in f64: the bulk and its origin first, then everything relative to it.
+    let objects: Vec<&tobj::Model> = models
+        .iter()
+        .filter(|m| !m.mesh.indices.is_empty())
+        .collect();
+    let boxes: Vec<DBox> = objects
+        .iter()
+        .map(|m| {
+            let mut b = DBox::EMPTY;
+            m.mesh
+                .positions
+                .chunks_exact(3)
+                .for_each(|c| b.include(DVec3::new(c[0], c[1], c[2])));
+            b
+        })
+        .collect();
+    let bulk = bulk(&boxes);
+    for &s in &bulk.strays {
+        warnings.push(format!(
+            "object '{}' lies {:.0} m from the rest of the model: it gets a cell of its own",
+            objects[s].name,
+            boxes[s].distance(&bulk.bounds)
+        ));
+    }
+    let origin = local_origin(&bulk.bounds);
+    model.origin = origin.to_array();
+    for m in objects {
+        let mesh = &m.mesh;
+        let material = mesh.material_id.map_or(0, |i| i as u32 + 1);
+        let base = model
+            .materials
+            .get(material as usize)
+            .map_or([1.0; 4], |mat| mat.base_color);
+        let positions: Vec<[f32; 3]> = mesh
+            .positions
+            .chunks_exact(3)
+            .map(|c| [c[0] - origin.x, c[1] - origin.y, c[2] - origin.z].map(|x| x as f32))
+            .collect();
+        let normals: Vec<[f32; 3]> = mesh
+            .normals
+            .chunks_exact(3)
+            .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
+            .collect();
+        let colors: Vec<[f32; 4]> = if mesh.vertex_color.len() == mesh.positions.len() {
+            mesh.vertex_color
+                .chunks_exact(3)
+                .map(|c| {
+                    [
+                        c[0] as f32 * base[0],
+                        c[1] as f32 * base[1],
+                        c[2] as f32 * base[2],
+                        base[3],
+                    ]
+                })
+                .collect()
+        } else {
+            vec![base; positions.len()]
+        };
+        let normals = (!normals.is_empty()).then_some(normals.as_slice());
+        let lod = mesh_from_streams(&positions, normals, &colors, mesh.indices.clone())
+            .map_err(|e| format!("object '{}': {e}", m.name))?;
+        let def = model.defs.len() as u32;
+        model.defs.push(ObjectDef {
+            name: m.name.clone(),
+            lods: vec![lod],
+            material,
+        });
+        model.instances.push(Instance {
+            name: m.name.clone(),
+            def,
+            transform: Mat4::IDENTITY,
+            material,
+            occluder: false,
+            tags: Default::default(),
+        });
+    }
+    model.warnings = warnings;
+    Ok(model)
+}
+
+/// A reader that hands out at most one line per `fill_buf`, so that when the parser fails,
+/// `line` is the 0-based index of the line it was reading.
+struct LineReader<'a> {
+    text: &'a [u8],
+    pos: usize,
+    newlines: usize,
+    /// Index of the line the last `fill_buf` started in.
+    line: usize,
+}
+
+impl<'a> LineReader<'a> {
+    fn new(text: &'a [u8]) -> Self {
+        LineReader {
+            text,
+            pos: 0,
+            newlines: 0,
+            line: 0,
+        }
+    }
+}
+
+impl Read for LineReader<'_> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let chunk = self.fill_buf()?;
+        let n = chunk.len().min(buf.len());
+        buf[..n].copy_from_slice(&chunk[..n]);
+        self.consume(n);
+        Ok(n)
+    }
+}
+
+impl BufRead for LineReader<'_> {
+    fn fill_buf(&mut self) -> std::io::Result<&[u8]> {
+        if self.pos == 0 || self.text.get(self.pos - 1) == Some(&b'\n') {
+            self.line = self.newlines;
+        }
+        let rest = &self.text[self.pos..];
+        let end = rest
+            .iter()
+            .position(|&b| b == b'\n')
+            .map_or(rest.len(), |i| i + 1);
+        Ok(&rest[..end])
+    }
+
+    fn consume(&mut self, amt: usize) {
+        let amt = amt.min(self.text.len() - self.pos);
+        self.newlines += self.text[self.pos..self.pos + amt]
+            .iter()
+            .filter(|&&b| b == b'\n')
+            .count();
+        self.pos += amt;
+    }
+}
