@@ -174,6 +174,30 @@ fn a_model_without_occluders_falls_back_to_an_open_grid() {
     );
 }
 
+/// In an open grid every cell sees every other through exponentially many portal sequences
+/// (spider.obj hung the client and took the server to 7 GB). The search stops at its bound and
+/// answers with the frustum over the reached cells; for a grid it goes there directly.
+#[test]
+fn eye_to_cell_on_an_open_grid_is_bounded_and_conservative() {
+    let bounds = bx([0.0, 0.0, 0.0], [60.0, 60.0, 60.0]);
+    let mut g = portico_data::cells::subdivide::subdivide(&bounds, &[]);
+    portico_data::cells::portals::find_portals(&mut g, &[], &[]);
+    assert!(
+        g.grid_fallback && g.cells.len() >= 200,
+        "{} cells",
+        g.cells.len()
+    );
+    let view = Frustum::all_around(Vec3::new(5.0, 5.0, 5.0));
+    let start = g.locate(view.eye).unwrap();
+    let expected = portico_data::cells::realtime::frustum_reached(&g, &view, start);
+    // Conservative: every cell is connected and in view, so every cell is reached, once.
+    assert_eq!(expected.len(), g.cells.len());
+    assert_eq!(eye_to_cell(&g, &view), expected);
+    // Without the grid flag the portal search runs, hits its bound, and falls back to the same.
+    g.grid_fallback = false;
+    assert_eq!(eye_to_cell(&g, &view).len(), expected.len());
+}
+
 /// A built building: cell graph, stab lists, occluder faces, object bounds.
 type Built = (CellGraph, Vec<StabList>, Vec<Aabb>, Vec<Aabb>);
 

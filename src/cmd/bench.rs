@@ -4,7 +4,7 @@
 //! Funkhouser Table 4.3 / Fig. 4.22, RRB §5.2-5.3). The work is `portico_client::bench`.
 
 use crate::progress::Bars;
-use anyhow::{Context, Result};
+use anyhow::Result;
 use portico_client::bench::{BenchConfig, BenchSummary, RunKind, report};
 use portico_data::Database;
 use portico_data::path::CameraPath;
@@ -50,15 +50,8 @@ pub struct Args {
 
 /// Loads the path file or generates a standard path through the database's cells.
 fn load_path(a: &Args) -> Result<CameraPath> {
-    a.route.load(|| {
-        let db = Database::open(&a.db)?;
-        db.cell_graph()?.with_context(|| {
-            format!(
-                "{}: built without cells; give a path file with --path",
-                a.db.display()
-            )
-        })
-    })
+    a.route
+        .load(|| crate::cmd::path::Scene::of_database(&Database::open(&a.db)?))
 }
 
 /// Runs the benchmark with a progress bar and prints the table.

@@ -4,7 +4,7 @@
 use crate::progress::Bars;
 use anyhow::{Context, Result, bail};
 use portico_client::elision::Algorithm;
-use portico_client::net::{Remote, cells_blocking};
+use portico_client::net::Remote;
 use portico_client::policy::parse_policy;
 use portico_client::walk::{WalkConfig, WalkSummary, walk};
 use portico_data::path::CameraPath;
@@ -84,7 +84,7 @@ pub fn load_path(
     token: Option<String>,
     route: &crate::cmd::path::PathArgs,
 ) -> Result<CameraPath> {
-    route.load(|| cells_blocking(&Remote::new(server, token)?))
+    route.load(|| crate::cmd::path::Scene::of_server(&Remote::new(server, token)?))
 }
 
 /// Runs the walk with a progress bar and prints the summary.
@@ -128,6 +128,19 @@ pub fn run(a: Args) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
         print_summary(&summary);
+    }
+    if summary.frames > 0 && summary.visible_objects.max <= 0.0 {
+        bail!(
+            "the walk saw nothing in {} frames: its path ({}) never looks at the model; try --path-kind orbit",
+            summary.frames,
+            summary.path
+        );
+    }
+    if summary.frames > 0 && summary.drawn_triangles.max <= 0.0 {
+        eprintln!(
+            "warning: nothing arrived in time to be drawn in {} frames (the client never waits); walk longer",
+            summary.frames
+        );
     }
     Ok(())
 }

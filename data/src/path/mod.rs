@@ -1,6 +1,12 @@
 //! Observer paths: timed keyframes (eye, view direction) that walkthroughs and benchmarks replay
-//! frame by frame, and generators for standard paths through the cells of any model
-//! (Funkhouser §7 replays recorded paths; DESIGN §5 `portico path --kind tour|spin|revisit`).
+//! frame by frame (Funkhouser §7 replays recorded paths), and generators for standard paths:
+//! tours between the rooms of a building's cells, and, for models without rooms, an orbit and a
+//! fly-through ([`survey`]).
+//!
+//! On disk a path is JSON: `{"kind": "tour", "keyframes": [{"t": 0.0, "eye": [x, y, z],
+//! "dir": [x, y, z]}, ...]}`, times in seconds, increasing; positions in the model's metres.
+
+pub mod survey;
 
 use crate::cells::CellGraph;
 use crate::geometry::Aabb;
@@ -39,6 +45,53 @@ pub enum PathKind {
     Spin,
     /// A tour out and the same way back (tests how well the cache keeps what it saw).
     Revisit,
+    /// Once around the model, looking at it from outside.
+    Orbit,
+    /// Straight through the model along its longer side, through the least solid.
+    Flythrough,
+}
+
+/// Whether the cells have rooms to tour: two or more room-sized live cells joined through
+/// portals, found by occluders (not a grid of open cells, not one box around an object).
+pub fn has_rooms(graph: &CellGraph) -> bool {
+    if graph.grid_fallback {
+        return false;
+    }
+    let rooms = (0..graph.cells.len() as u32)
+        .filter(|&c| graph.cells[c as usize].live && roomy(graph, c))
+        .count();
+    rooms >= 2 && !graph.portals.is_empty()
+}
+
+/// A standard path of `kind` for a model: `graph` its cells (if built), `bounds` and `objects`
+/// its boxes. A tour, revisit or spin in a model without rooms ([`has_rooms`]) becomes an orbit
+/// followed by a fly-through (a spin: the orbit), so every model gets a path that sees it.
+/// `None` only when the model is empty.
+#[allow(clippy::too_many_arguments)]
+pub fn standard(
+    graph: Option<&CellGraph>,
+    bounds: &Aabb,
+    objects: &[Aabb],
+    kind: PathKind,
+    legs: usize,
+    seed: u64,
+    speed: f32,
+    turn: f32,
+) -> Option<CameraPath> {
+    if bounds.is_empty() {
+        return None;
+    }
+    let rooms = graph.filter(|g| has_rooms(g));
+    match (kind, rooms) {
+        (PathKind::Orbit, _) | (PathKind::Spin, None) => Some(survey::orbit(bounds, speed)),
+        (PathKind::Flythrough, _) => Some(survey::flythrough(bounds, objects, speed)),
+        (PathKind::Tour | PathKind::Revisit, None) => Some(survey::then(
+            survey::orbit(bounds, speed),
+            survey::flythrough(bounds, objects, speed),
+            std::f32::consts::PI / turn.max(0.01),
+        )),
+        (_, Some(g)) => generate(g, kind, legs, seed, speed, turn),
+    }
 }
 
 impl CameraPath {
@@ -106,14 +159,8 @@ pub fn generate(
     speed: f32,
     turn: f32,
 ) -> Option<CameraPath> {
-    // Rooms to visit: live cells an observer can stand in (not the thin openings of doors and
-    // windows, which are live too but lead nowhere worth seeing).
-    let roomy = |c: u32| {
-        let s = graph.cells[c as usize].bounds.size();
-        s.x >= 1.0 && s.z >= 1.0 && s.y >= 2.0
-    };
     let mut live: Vec<u32> = (0..graph.cells.len() as u32)
-        .filter(|&c| graph.cells[c as usize].live && roomy(c))
+        .filter(|&c| graph.cells[c as usize].live && roomy(graph, c))
         .collect();
     if live.is_empty() {
         live = (0..graph.cells.len() as u32)
@@ -126,6 +173,8 @@ pub fn generate(
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (kind_name, points) = match kind {
         PathKind::Tour => ("tour", tour_points(graph, &live, legs, &mut rng)),
+        PathKind::Orbit => return Some(survey::orbit(&graph.bounds, speed)),
+        PathKind::Flythrough => return Some(survey::flythrough(&graph.bounds, &[], speed)),
         PathKind::Revisit => {
             let mut p = tour_points(graph, &live, legs.div_ceil(2), &mut rng);
             let back: Vec<Vec3> = p.iter().rev().skip(1).copied().collect();
@@ -138,6 +187,13 @@ pub fn generate(
         }
     };
     Some(timed(kind_name, &points, speed.max(0.01), turn.max(0.01)))
+}
+
+/// A live cell an observer can stand in and look around: not the thin opening of a door or a
+/// window, which is live too but leads nowhere worth seeing.
+fn roomy(graph: &CellGraph, c: u32) -> bool {
+    let s = graph.cells[c as usize].bounds.size();
+    s.x >= 1.0 && s.z >= 1.0 && s.y >= 2.0
 }
 
 /// Random rooms joined by their shortest portal chains, through portal centres.

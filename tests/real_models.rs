@@ -1,0 +1,152 @@
+//! Models a user brings that are not buildings: Debian's `assimp-testmodels` spider (an OBJ with
+//! no walls at all: the cells are an open grid) and the two-cylinder engine (one object: the
+//! cells are one box). Each builds, is served, and is walked headless along the default path,
+//! which for a model without rooms is an orbit and a fly-through; the frames must show it.
+
+use std::io::BufRead;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+
+const ASSIMP: &str = "/usr/share/assimp/models";
+
+fn corpus(rel: &str) -> Option<PathBuf> {
+    let p = Path::new(ASSIMP).join(rel);
+    if p.exists() {
+        return Some(p);
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "{ASSIMP} missing: .ci/run installs assimp-testmodels"
+    );
+    eprintln!("skipping: {} not installed", p.display());
+    None
+}
+
+fn portico(args: &[&str]) -> std::process::Output {
+    let out = Command::new(env!("CARGO_BIN_EXE_portico"))
+        .args(args)
+        .output()
+        .expect("run portico");
+    assert!(
+        out.status.success(),
+        "portico {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
+/// A server on a free loopback port; killed when dropped.
+struct Server(Child, String);
+
+impl Server {
+    fn start(db: &Path) -> Server {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_portico"))
+            .args(["serve", db.to_str().unwrap(), "--listen", "127.0.0.1:0"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start the server");
+        let mut lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
+        let first = lines.next().unwrap().unwrap();
+        let url = format!("http://{}", first.rsplit("http://").next().unwrap().trim());
+        // Keep draining the server's log so it never blocks on a full pipe.
+        std::thread::spawn(move || lines.for_each(drop));
+        Server(child, url)
+    }
+}
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Builds, serves and walks a model; returns drawn triangles per frame.
+fn walk_model(model: &Path) -> Vec<u64> {
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("m.portico");
+    portico(&[
+        "build",
+        model.to_str().unwrap(),
+        "-o",
+        db.to_str().unwrap(),
+        "--no-textures",
+    ]);
+    let server = Server::start(&db);
+    let out = dir.path().join("walk");
+    portico(&[
+        "walk",
+        "--server",
+        &server.1,
+        "--size",
+        "160x120",
+        "--max-frames",
+        "60",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
+    let mut lines = csv.lines();
+    let head: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = head.iter().position(|h| *h == "drawn_triangles").unwrap();
+    lines
+        .map(|l| l.split(',').nth(col).unwrap().parse().unwrap())
+        .collect()
+}
+
+fn assert_seen(name: &str, drawn: &[u64]) {
+    assert_eq!(drawn.len(), 60, "{name}: frames");
+    // The first frames (50 ms each) may come before any geometry arrives: the client never
+    // waits. After that, every frame shows the model.
+    let empty = drawn.iter().skip(20).filter(|&&t| t == 0).count();
+    assert_eq!(
+        empty, 0,
+        "{name}: {empty} empty frames after the first 20: {drawn:?}"
+    );
+}
+
+#[test]
+fn the_spider_without_walls_builds_serves_and_walks() {
+    let Some(m) = corpus("OBJ/spider.obj") else {
+        return;
+    };
+    assert_seen("spider.obj", &walk_model(&m));
+}
+
+#[test]
+fn the_engine_an_object_not_a_building_builds_serves_and_walks() {
+    let Some(m) = corpus("glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb") else {
+        return;
+    };
+    assert_seen("2CylinderEngine.glb", &walk_model(&m));
+}
+
+#[test]
+fn roomless_models_get_an_orbit_and_a_flythrough() {
+    let Some(m) = corpus("glTF2/2CylinderEngine-glTF-Binary/2CylinderEngine.glb") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("engine.portico");
+    let path = dir.path().join("path.json");
+    portico(&[
+        "build",
+        m.to_str().unwrap(),
+        "-o",
+        db.to_str().unwrap(),
+        "--no-hierarchy",
+    ]);
+    portico(&[
+        "path",
+        "--db",
+        db.to_str().unwrap(),
+        "-o",
+        path.to_str().unwrap(),
+    ]);
+    let p: serde_json::Value = serde_json::from_slice(&std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!(p["kind"], "orbit+flythrough");
+    let keys = p["keyframes"].as_array().unwrap();
+    let duration = keys.last().unwrap()["t"].as_f64().unwrap();
+    assert!(duration > 12.0, "{duration} s");
+}
