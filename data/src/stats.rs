@@ -52,8 +52,11 @@ pub struct DbStats {
     pub geometry_bytes: u64,
     /// Total file size.
     pub file_bytes: u64,
-    /// World bounds (min, max).
+    /// Bounds (min, max) in metres, relative to `origin`.
     pub bounds: [[f32; 3]; 2],
+    /// The local origin in the source's coordinates (metres): add it to place the model back in
+    /// the world (survey coordinates); zero for models built near their own origin.
+    pub origin: [f64; 3],
     /// Leaf cells (0 without cells).
     pub cells: u64,
     /// Portals.
@@ -153,6 +156,7 @@ pub fn stats(db: &Database) -> DbStats {
         geometry_bytes,
         file_bytes: db.file_len(),
         bounds: [h.bounds.min, h.bounds.max],
+        origin: h.origin,
         cells: h.cells.as_ref().map_or(0, |c| c.stats.cells),
         portals: h.cells.as_ref().map_or(0, |c| c.stats.portals),
         cell_stats: h.cells.as_ref().map(|c| c.stats.clone()),
@@ -181,7 +185,7 @@ impl DbStats {
     /// A human-readable summary with the LOD table laid out like Funkhouser's Table 3.1.
     pub fn to_text(&self) -> String {
         let mut s = format!(
-            "{} (format v{}{})\n  objects {}  instances {}  occluders {}  materials {}\n  triangles: highest LOD {}  all LODs {}\n  segments {}  geometry {:.1} MB  file {:.1} MB\n\n",
+            "{} (format v{}{})\n  objects {}  instances {}  occluders {}  materials {}\n  triangles: highest LOD {}  all LODs {}\n  segments {}  geometry {:.1} MB  file {:.1} MB\n",
             self.name,
             self.format_version,
             if self.flattened { ", flattened" } else { "" },
@@ -195,6 +199,19 @@ impl DbStats {
             self.geometry_bytes as f64 / 1e6,
             self.file_bytes as f64 / 1e6,
         );
+        let [lo, hi] = self.bounds;
+        s.push_str(&format!(
+            "  bounds ({:.2}, {:.2}, {:.2}) to ({:.2}, {:.2}, {:.2}) m",
+            lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]
+        ));
+        if self.origin != [0.0; 3] {
+            let o = self.origin;
+            s.push_str(&format!(
+                " from the local origin ({:.3}, {:.3}, {:.3}) in the source's coordinates",
+                o[0], o[1], o[2]
+            ));
+        }
+        s.push_str("\n\n");
         s.push_str(&format!(
             "  {:<12} {:>10} {:>12} {:>8} {:>10} {:>8}\n",
             "LOD", "objects", "polygons", "min", "mean", "max"

@@ -117,6 +117,21 @@ fn check(root: &json::Root) -> Result<Vec<String>, String> {
              re-export without Draco, or recompress with gltfpack (EXT_meshopt_compression is supported)"
             .into());
     }
+    // The `gltf` crate's cross-check indexes a primitive's POSITION accessor before checking
+    // that it exists (gltf-json 1.4.1, mesh.rs): check it first, so its validation cannot panic.
+    for (m, mesh) in root.meshes.iter().enumerate() {
+        for (p, prim) in mesh.primitives.iter().enumerate() {
+            let position = prim
+                .attributes
+                .get(&json::validation::Checked::Valid(json::mesh::Semantic::Positions));
+            if let Some(a) = position.filter(|a| a.value() >= root.accessors.len()) {
+                return Err(format!(
+                    "mesh {m} primitive {p}: POSITION accessor {} does not exist",
+                    a.value()
+                ));
+            }
+        }
+    }
     let mut errors = Vec::new();
     root.validate(root, json::Path::new, &mut |path, e| {
         let path = path().to_string();
