@@ -8,7 +8,11 @@ use portico_data::import::import_bytes;
 use proptest::prelude::*;
 
 fn case(name: &str) -> Vec<u8> {
-    std::fs::read(format!("{}/tests/cases/import/{name}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+    std::fs::read(format!(
+        "{}/tests/cases/import/{name}",
+        env!("CARGO_MANIFEST_DIR")
+    ))
+    .unwrap()
 }
 
 /// Imports and asserts that it did not panic; an error must be one line.
@@ -52,8 +56,10 @@ fn value_strategy() -> impl Strategy<Value = serde_json::Value> {
     prop_oneof![
         any::<i64>().prop_map(serde_json::Value::from),
         (0u64..64).prop_map(serde_json::Value::from),
-        prop::sample::select(vec![5120u64, 5121, 5122, 5123, 5125, 5126, 5130]).prop_map(serde_json::Value::from),
-        any::<f64>().prop_map(|f| serde_json::Number::from_f64(f).map_or(serde_json::Value::Null, serde_json::Value::Number)),
+        prop::sample::select(vec![5120u64, 5121, 5122, 5123, 5125, 5126, 5130])
+            .prop_map(serde_json::Value::from),
+        any::<f64>().prop_map(|f| serde_json::Number::from_f64(f)
+            .map_or(serde_json::Value::Null, serde_json::Value::Number)),
         Just(serde_json::json!([1e30, -1e30, 0.5])),
         Just(serde_json::json!([0, 0, 0])),
         Just(serde_json::json!([0])),
@@ -69,7 +75,9 @@ fn set(doc: &mut serde_json::Value, path: &[&str], index: usize, value: serde_js
     let mut pointer = String::new();
     for key in &path[..path.len() - 1] {
         let step = match (*key, doc.pointer(&pointer)) {
-            ("#", Some(serde_json::Value::Array(a))) if !a.is_empty() => (index % a.len()).to_string(),
+            ("#", Some(serde_json::Value::Array(a))) if !a.is_empty() => {
+                (index % a.len()).to_string()
+            }
             ("#", _) => return,
             (k, _) => k.to_string(),
         };
@@ -81,7 +89,11 @@ fn set(doc: &mut serde_json::Value, path: &[&str], index: usize, value: serde_js
             o.insert(path[path.len() - 1].to_string(), value);
         }
         Some(serde_json::Value::Array(a)) => {
-            if let Some(slot) = path[path.len() - 1].parse::<usize>().ok().and_then(|n| a.get_mut(n)) {
+            if let Some(slot) = path[path.len() - 1]
+                .parse::<usize>()
+                .ok()
+                .and_then(|n| a.get_mut(n))
+            {
                 *slot = value;
             }
         }

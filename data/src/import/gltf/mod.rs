@@ -121,9 +121,9 @@ fn check(root: &json::Root) -> Result<Vec<String>, String> {
     // that it exists (gltf-json 1.4.1, mesh.rs): check it first, so its validation cannot panic.
     for (m, mesh) in root.meshes.iter().enumerate() {
         for (p, prim) in mesh.primitives.iter().enumerate() {
-            let position = prim
-                .attributes
-                .get(&json::validation::Checked::Valid(json::mesh::Semantic::Positions));
+            let position = prim.attributes.get(&json::validation::Checked::Valid(
+                json::mesh::Semantic::Positions,
+            ));
             if let Some(a) = position.filter(|a| a.value() >= root.accessors.len()) {
                 return Err(format!(
                     "mesh {m} primitive {p}: POSITION accessor {} does not exist",
@@ -322,7 +322,7 @@ impl Importer<'_> {
         let t = m.w_axis.truncate();
         if t.abs().max_element() > MAX_COORDINATE {
             return Err(format!(
-                "node {n}{name}: translation ({:e}, {:e}, {:e}) m is beyond ±{MAX_COORDINATE:e} m, not a building's coordinate",
+                "node {n}{name}: translation ({:.3e}, {:.3e}, {:.3e}) m is beyond ±{MAX_COORDINATE:.0e} m, not a building's coordinate",
                 t.x, t.y, t.z
             ));
         }
@@ -500,7 +500,7 @@ impl Importer<'_> {
             if !b.is_empty() && (far.is_nan() || far > MAX_COORDINATE) {
                 let node = &self.root.nodes[p.node];
                 return Err(format!(
-                    "node {}{}: its mesh reaches {far:e} m from the origin, beyond ±{MAX_COORDINATE:e} m",
+                    "node {}{}: its mesh reaches {far:.3e} m from the origin, beyond ±{MAX_COORDINATE:.0e} m",
                     p.node,
                     name_of(&node.name)
                 ));
