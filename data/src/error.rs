@@ -64,6 +64,9 @@ pub enum DataError {
     /// The impostor painter (the renderer used at build time) failed.
     #[error("painting impostors: {0}")]
     Impostor(String),
+    /// A computation ran past its [`crate::prefetch::Budget`] and was stopped.
+    #[error("stopped after {0:?}: the computation ran past its deadline")]
+    Deadline(std::time::Duration),
 }
 
 impl DataError {

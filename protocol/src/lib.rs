@@ -5,6 +5,7 @@
 //! (for people and curl), chosen by `Content-Type`. [`PROTOCOL_VERSION`] is bumped on any
 //! incompatible change; the server answers clients of another version with a clear error.
 
+pub mod batch;
 mod messages;
 
 pub use messages::*;

@@ -167,6 +167,50 @@ impl CellGraph {
     pub fn live_cells(&self) -> usize {
         self.cells.iter().filter(|c| c.live).count()
     }
+
+    /// Checks every cross-reference (tree nodes and children, leaf cells, portal cells and
+    /// axes, cells' portal lists) and that every box is finite, so that no traversal of a graph
+    /// read from a file can index out of range or loop.
+    pub fn validate(&self) -> Result<(), String> {
+        let (cells, portals, nodes) = (self.cells.len(), self.portals.len(), self.tree.len());
+        let finite = |b: &Aabb| b.min.iter().chain(&b.max).all(|x| x.is_finite());
+        if !finite(&self.bounds) {
+            return Err("the bounds are not finite".into());
+        }
+        if nodes == 0 {
+            return Err("the k-D tree is empty".into());
+        }
+        for (i, n) in self.tree.iter().enumerate() {
+            match *n {
+                KdNode::Leaf(c) if c as usize >= cells => {
+                    return Err(format!("tree node {i} names cell {c} of {cells}"));
+                }
+                // Children come after their parent: no cycles.
+                KdNode::Split { axis, at, lo, hi } => {
+                    if axis > 2 || !at.is_finite() {
+                        return Err(format!("tree node {i} splits on axis {axis} at {at}"));
+                    }
+                    for child in [lo, hi] {
+                        if child as usize >= nodes || child as usize <= i {
+                            return Err(format!("tree node {i} has child {child} of {nodes}"));
+                        }
+                    }
+                }
+                _ => {}
+            }
+        }
+        for (i, p) in self.portals.iter().enumerate() {
+            if p.axis > 2 || p.cells.iter().any(|&c| c as usize >= cells) || !finite(&p.rect) {
+                return Err(format!("portal {i} is malformed"));
+            }
+        }
+        for (i, c) in self.cells.iter().enumerate() {
+            if !finite(&c.bounds) || c.portals.iter().any(|&p| p as usize >= portals) {
+                return Err(format!("cell {i} is malformed"));
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Closed-box intersection (touching faces count).
@@ -222,6 +266,33 @@ impl StabList {
     /// The entry for a reached cell.
     pub fn entry(&self, cell: u32) -> Option<&StabEntry> {
         self.entries.iter().find(|e| e.cell == cell)
+    }
+
+    /// Checks that every cell and object it names exists (`cells`, `objects` counts) and that
+    /// its regions are finite.
+    pub fn validate(&self, cells: usize, objects: usize) -> Result<(), String> {
+        let obj_ok = |o: &u32| (*o as usize) < objects;
+        if !self.inside.iter().chain(&self.partial).all(obj_ok) {
+            return Err("an incident object does not exist".into());
+        }
+        for e in &self.entries {
+            if e.cell as usize >= cells || !e.objects.iter().all(obj_ok) {
+                return Err(format!(
+                    "the entry for cell {} names what does not exist",
+                    e.cell
+                ));
+            }
+            if !e
+                .region
+                .min
+                .iter()
+                .chain(&e.region.max)
+                .all(|x| !x.is_nan())
+            {
+                return Err(format!("the entry for cell {} has a NaN region", e.cell));
+            }
+        }
+        Ok(())
     }
 }
 

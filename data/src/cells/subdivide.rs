@@ -267,6 +267,35 @@ pub(crate) mod tests {
         );
     }
 
+    /// Found by the `reader` fuzz target: a graph read from a damaged (resealed) file with a split
+    /// on axis 7 made `locate` index out of range. Such a graph is now refused when read.
+    #[test]
+    fn graphs_with_bad_references_are_refused() {
+        let walls = faces_of(&[bx([5.0, 0.0, 0.0], [5.2, 3.0, 4.0])]);
+        let good = subdivide(&bx([0.0; 3], [10.0, 3.0, 4.0]), &walls);
+        assert_eq!(good.validate(), Ok(()));
+        let mut bad = good.clone();
+        if let Some(KdNode::Split { axis, .. }) = bad
+            .tree
+            .iter_mut()
+            .find(|n| matches!(n, KdNode::Split { .. }))
+        {
+            *axis = 7;
+        }
+        assert!(bad.validate().unwrap_err().contains("axis 7"));
+        let mut bad = good.clone();
+        bad.tree[0] = KdNode::Split {
+            axis: 0,
+            at: 1.0,
+            lo: 0,
+            hi: 1,
+        };
+        assert!(bad.validate().is_err(), "a node that is its own child");
+        let mut bad = good;
+        bad.tree.push(KdNode::Leaf(999));
+        assert!(bad.validate().is_err());
+    }
+
     #[test]
     fn locate_is_consistent_with_cell_bounds() {
         let walls = faces_of(&[bx([5.0, 0.0, 0.0], [5.2, 3.0, 4.0])]);

@@ -144,6 +144,12 @@ impl Database {
                 "cell graph and cell index disagree",
             ));
         }
+        graph.validate().map_err(|e| {
+            DataError::corrupt(
+                &self.path,
+                format!("cell graph (segment {}): {e}", c.graph_segment),
+            )
+        })?;
         Ok(Some(graph))
     }
 
@@ -158,7 +164,20 @@ impl Database {
         if *seg == u32::MAX {
             return Ok(StabList::default());
         }
-        self.structured(*seg)
+        let list: StabList = self.structured(*seg)?;
+        let cells = self
+            .header
+            .cells
+            .as_ref()
+            .map_or(0, |c| c.stab_segments.len());
+        list.validate(cells, self.header.instances.len())
+            .map_err(|e| {
+                DataError::corrupt(
+                    &self.path,
+                    format!("stab list of cell {cell} (segment {seg}): {e}"),
+                )
+            })?;
+        Ok(list)
     }
 
     /// The occluder faces the cells were built from.

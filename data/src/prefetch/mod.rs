@@ -26,6 +26,51 @@ use portico_protocol::{
 use range::ObserverRange;
 use std::collections::HashSet;
 use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
+
+/// Most release hints in one answer: a client that holds more than the lookahead needs is told
+/// about the rest in later answers, so one request with a huge held set cannot make a huge
+/// answer.
+pub const MAX_RELEASE_HINTS: usize = 4096;
+
+/// How long one answer may compute: the loops check it and stop with
+/// [`crate::DataError::Deadline`], so no request can hold a worker long.
+#[derive(Debug, Clone, Copy)]
+pub struct Budget {
+    start: Instant,
+    deadline: Option<Instant>,
+}
+
+impl Budget {
+    /// No limit (the load tester's oracle and baselines, tests).
+    pub fn unlimited() -> Budget {
+        Budget {
+            start: Instant::now(),
+            deadline: None,
+        }
+    }
+
+    /// Stops at `deadline`.
+    pub fn until(deadline: Instant) -> Budget {
+        Budget {
+            start: Instant::now(),
+            deadline: Some(deadline),
+        }
+    }
+
+    /// An error once the deadline has passed.
+    pub fn check(&self) -> Result<()> {
+        match self.deadline {
+            Some(d) if Instant::now() >= d => Err(crate::DataError::Deadline(self.start.elapsed())),
+            _ => Ok(()),
+        }
+    }
+
+    /// Time spent since the budget was made.
+    pub fn elapsed(&self) -> Duration {
+        self.start.elapsed()
+    }
+}
 
 /// A database opened for prefetch answers: the cell graph decoded once, stab lists decoded on
 /// first use and kept (lock-free reads afterwards), segment sizes at hand.
@@ -111,17 +156,30 @@ impl Prefetcher {
         policy: &Policy,
         held: &HashSet<u32>,
     ) -> Result<PrefetchResponse> {
+        self.answer_within(obs, policy, held, &Budget::unlimited())
+    }
+
+    /// [`Prefetcher::answer`], stopped with [`crate::DataError::Deadline`] if it runs past
+    /// `budget` (checked per range cell, per stab-list entry and every 1,024 objects).
+    pub fn answer_within(
+        &self,
+        obs: &Observer,
+        policy: &Policy,
+        held: &HashSet<u32>,
+        budget: &Budget,
+    ) -> Result<PrefetchResponse> {
         let t0 = std::time::Instant::now();
         let range = ObserverRange::new(obs, policy);
         let (ranged, stab_items, cands, lookahead_cells) = match &self.graph {
-            Some(g) => self.lookahead_with_cells(g, &range, obs, policy)?,
+            Some(g) => self.lookahead_with_cells(g, &range, obs, policy, budget)?,
             None => (
                 1,
                 Vec::new(),
-                self.lookahead_without_cells(&range, obs, policy),
+                self.lookahead_without_cells(&range, obs, policy, budget)?,
                 1,
             ),
         };
+        budget.check()?;
         let mut resp = read_set(stab_items, cands, held, policy.read_bytes);
         resp.range_cells = ranged;
         resp.lookahead_cells = lookahead_cells;
@@ -137,8 +195,10 @@ impl Prefetcher {
         range: &ObserverRange,
         obs: &Observer,
         policy: &Policy,
+        budget: &Budget,
     ) -> Result<(u32, Vec<NeedItem>, Vec<Candidate>, u32)> {
         let ranged = range::range_cells(graph, range, policy.range_cull);
+        budget.check()?;
         let now = self.visible_now(graph, obs)?;
         let mut stab_items = Vec::new();
         let mut seen_obj = vec![false; self.db.header().instances.len()];
@@ -158,6 +218,7 @@ impl Prefetcher {
             }
             let stab = self.stab(cell)?;
             for entry in &stab.entries {
+                budget.check()?;
                 if !range.lookahead_keeps(policy.lookahead_cull, &entry.region) {
                     continue;
                 }
@@ -272,7 +333,8 @@ impl Prefetcher {
         range: &ObserverRange,
         obs: &Observer,
         policy: &Policy,
-    ) -> Vec<Candidate> {
+        budget: &Budget,
+    ) -> Result<Vec<Candidate>> {
         let mut cands = Vec::new();
         let mut claimed = 0u64;
         let mut order: Vec<(u32, u32)> = self
@@ -284,13 +346,16 @@ impl Prefetcher {
             .map(|(i, inst)| (range.frames_to(&inst.bounds), i as u32))
             .collect();
         order.sort_unstable();
-        for (frames, o) in order {
+        for (i, (frames, o)) in order.into_iter().enumerate() {
+            if i % 1024 == 0 {
+                budget.check()?;
+            }
             if frames > 0 && claimed > policy.cache_bytes {
                 break;
             }
             claimed += self.add_object(o, frames.min(range.depth), range, obs, policy, &mut cands);
         }
-        cands
+        Ok(cands)
     }
 
     /// Adds the LODs of one object from the coarsest up to its maximum; returns their bytes.
@@ -399,6 +464,7 @@ fn read_set(
         .filter(|s| !lookahead_segments.contains(s))
         .collect();
     evict.sort_unstable();
+    evict.truncate(MAX_RELEASE_HINTS);
     PrefetchResponse {
         version: PROTOCOL_VERSION,
         items,
