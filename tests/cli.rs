@@ -253,3 +253,115 @@ fn serve_picks_up_a_rebuilt_file_on_sighup_and_stops_on_sigterm() {
     let rest: Vec<String> = lines.map_while(Result::ok).collect();
     assert_eq!(rest.last().map(String::as_str), Some("stopped"), "{rest:?}");
 }
+
+/// Fault 7 of the server hardening: a SIGHUP while a client reads slowly used to stall every new
+/// connection for the whole drain (10 s), and the log claimed connections were closed that were
+/// not. Now new connections get the rebuilt file at once, the slow one is closed after the drain
+/// (`--drain-secs`), and the log says exactly that. SIGTERM then stops within the drain too.
+#[test]
+fn sighup_with_a_slow_reader_stalls_nobody_and_says_what_it_did() {
+    use std::io::{BufRead, Read, Write};
+    let dir = tempfile::tempdir().unwrap();
+    let glb = generated(dir.path());
+    let db = dir.path().join("served.portico");
+    ok(&["build", s(&glb), "-o", s(&db), "--no-hierarchy"]);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_portico"))
+        .args([
+            "serve",
+            s(&db),
+            "--listen",
+            "127.0.0.1:0",
+            "--drain-secs",
+            "2",
+        ])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
+    let first = lines.next().unwrap().unwrap();
+    let addr = first.rsplit("http://").next().unwrap().trim().to_string();
+    let before = database_id(&addr).expect("manifest");
+    // A slow reader: a batch of the biggest segment a thousand times over, never read.
+    let biggest = portico_data::Database::open(&db)
+        .unwrap()
+        .segments()
+        .iter()
+        .max_by_key(|e| e.length)
+        .unwrap()
+        .id;
+    let ids = vec![biggest.to_string(); 1000].join(",");
+    let sock = socket2::Socket::new(socket2::Domain::IPV4, socket2::Type::STREAM, None).unwrap();
+    sock.set_recv_buffer_size(4096).unwrap();
+    sock.connect(&addr.parse::<std::net::SocketAddr>().unwrap().into())
+        .unwrap();
+    let mut slow: std::net::TcpStream = sock.into();
+    write!(slow, "GET /v1/batch?ids={ids} HTTP/1.1\r\nHost: x\r\n\r\n").unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    // Rebuild and reload: a new connection is answered at once, by the new file.
+    let other = dir.path().join("other.glb");
+    ok(&[
+        "generate",
+        "--preset",
+        "tiny",
+        "--seed",
+        "9",
+        "-o",
+        s(&other),
+    ]);
+    ok(&["build", s(&other), "-o", s(&db), "--no-hierarchy"]);
+    assert!(
+        Command::new("kill")
+            .args(["-HUP", &child.id().to_string()])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let reloaded = lines.next().unwrap().unwrap();
+    assert!(reloaded.starts_with("serving "), "{reloaded}");
+    let t0 = std::time::Instant::now();
+    let after = database_id(&addr).expect("manifest after the reload");
+    let waited = t0.elapsed();
+    assert_ne!(before, after);
+    assert!(
+        waited < std::time::Duration::from_millis(100),
+        "a new connection waited {waited:?}"
+    );
+    // After the drain the log tells the truth: the slow reader was closed, and it was.
+    let drained = lines.next().unwrap().unwrap();
+    assert!(
+        drained.contains("1 still busy after 2 s were closed"),
+        "{drained}"
+    );
+    slow.set_read_timeout(Some(std::time::Duration::from_secs(5)))
+        .unwrap();
+    let mut sink = vec![0u8; 1 << 20];
+    let closed = loop {
+        match slow.read(&mut sink) {
+            Ok(0) => break true,
+            Ok(_) => continue,
+            Err(e) => break e.kind() == std::io::ErrorKind::ConnectionReset,
+        }
+    };
+    assert!(closed, "the slow reader's connection was not closed");
+    // SIGTERM: stops within the drain.
+    let t0 = std::time::Instant::now();
+    assert!(
+        Command::new("kill")
+            .args(["-TERM", &child.id().to_string()])
+            .status()
+            .unwrap()
+            .success()
+    );
+    let status = loop {
+        if let Some(st) = child.try_wait().unwrap() {
+            break st;
+        }
+        assert!(
+            t0.elapsed() < std::time::Duration::from_secs(10),
+            "no stop within 10 s"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    assert!(status.success());
+}

@@ -69,20 +69,33 @@ fn build_tiny(dir: &Path) -> PathBuf {
 
 /// Starts a replica on a free port; returns it and its address (read from its start-up line).
 fn replica(db: &Path) -> (Proc, String) {
-    let mut child = portico(&["serve", db.to_str().unwrap(), "--listen", "127.0.0.1:0"])
+    let (p, addr, _) = replica_with(db, &[]);
+    (p, addr)
+}
+
+/// A replica with more `serve` flags; also returns its log lines (stderr) as they come.
+fn replica_with(db: &Path, flags: &[&str]) -> (Proc, String, std::sync::mpsc::Receiver<String>) {
+    let mut args = vec!["serve", db.to_str().unwrap(), "--listen", "127.0.0.1:0"];
+    args.extend(flags);
+    let mut child = portico(&args)
         .stderr(Stdio::piped())
         .stdout(Stdio::null())
         .spawn()
         .unwrap();
-    let stderr = child.stderr.take().unwrap();
-    let mut line = String::new();
-    BufReader::new(stderr).read_line(&mut line).unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let line = lines.next().unwrap().unwrap();
     let addr = line.rsplit("http://").next().unwrap().trim().to_string();
     assert!(
         addr.starts_with("127.0.0.1:"),
         "unexpected start-up line {line:?}"
     );
-    (Proc(child), addr)
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for l in lines.map_while(Result::ok) {
+            let _ = tx.send(l);
+        }
+    });
+    (Proc(child), addr, rx)
 }
 
 fn free_port() -> u16 {
@@ -173,10 +186,21 @@ fn three_replicas_behind_nginx_survive_losing_one() {
     let (_nginx, base) = start_nginx(&nginx, dir.path(), &addrs);
     let rt = tokio::runtime::Runtime::new().unwrap();
 
-    // Immutable segments are served from nginx's cache the second time.
+    // Content-named segments are served from nginx's cache the second time.
     rt.block_on(async {
         let http = reqwest::Client::new();
-        let url = format!("{base}/v1/segments/1");
+        let m: serde_json::Value = http
+            .get(format!("{base}/v1/manifest"))
+            .send()
+            .await
+            .unwrap()
+            .json()
+            .await
+            .unwrap();
+        let url = format!(
+            "{base}/v1/db/{}/segments/1",
+            m["database_id"].as_str().unwrap()
+        );
         let first = http.get(&url).send().await.unwrap();
         assert_eq!(first.status(), 200);
         let bytes = first.bytes().await.unwrap();
@@ -308,4 +332,185 @@ fn three_replicas_behind_nginx_survive_losing_one() {
         p.latency_p50_s * 1e3,
         p.latency_p99_s * 1e3
     );
+}
+
+/// A rebuild behind the documented nginx: segment URLs name their database, so after the
+/// rebuild and SIGHUP no cache serves the old bytes under the new names, and a walk that was
+/// reading the old database stops cleanly (no checksum failures, no refetch loop). With
+/// `--token`, nginx's cache never answers a request that lacks the token.
+#[test]
+fn a_rebuild_and_a_token_behind_nginx_serve_no_stale_or_unauthorised_byte() {
+    let Some(nginx) = nginx_binary() else {
+        assert!(
+            std::env::var_os("CI").is_none(),
+            "nginx is not installed but CI is set"
+        );
+        eprintln!("skipping: nginx is not installed (apt-get install nginx-light)");
+        return;
+    };
+    const TOKEN: &str = "s3cret";
+    let dir = tempfile::tempdir().unwrap();
+    let db = build_tiny(dir.path());
+    let replicas: Vec<_> = (0..2)
+        .map(|_| replica_with(&db, &["--token", TOKEN]))
+        .collect();
+    let addrs: Vec<String> = replicas.iter().map(|(_, a, _)| a.clone()).collect();
+    let (_nginx, base) = start_nginx(&nginx, dir.path(), &addrs);
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    let http = reqwest::Client::new();
+    let manifest_id = |http: &reqwest::Client| {
+        let m: serde_json::Value = rt
+            .block_on(async {
+                http.get(format!("{base}/v1/manifest"))
+                    .bearer_auth(TOKEN)
+                    .send()
+                    .await
+                    .unwrap()
+                    .json()
+                    .await
+            })
+            .unwrap();
+        m["database_id"].as_str().unwrap().to_string()
+    };
+    let old_id = manifest_id(&http);
+    let seg_url = |id: &str| format!("{base}/v1/db/{id}/segments/1");
+    rt.block_on(async {
+        for expect in ["MISS", "HIT"] {
+            let r = http
+                .get(seg_url(&old_id))
+                .bearer_auth(TOKEN)
+                .send()
+                .await
+                .unwrap();
+            assert_eq!(r.status(), 200);
+            assert_eq!(r.headers()["x-cache-status"], expect);
+        }
+        // The cached answer is not served without the token, nor with a query token.
+        assert_eq!(
+            http.get(seg_url(&old_id)).send().await.unwrap().status(),
+            401
+        );
+        let q = format!("{}?token={TOKEN}", seg_url(&old_id));
+        assert_eq!(http.get(&q).send().await.unwrap().status(), 401);
+    });
+
+    // A walk reads through nginx while the file is rebuilt and the replicas reload.
+    let graph = portico_data::Database::open(&db)
+        .unwrap()
+        .cell_graph()
+        .unwrap()
+        .unwrap();
+    let cfg = WalkConfig {
+        server: base.clone(),
+        token: Some(TOKEN.into()),
+        path: generate(&graph, PathKind::Tour, 3, 3, 1.5, 1.5).unwrap(),
+        budget_s: 0.02,
+        cache_bytes: 32 << 20,
+        size: (64, 48),
+        elision: Algorithm::Optimize,
+        policy: Policy::default(),
+        out: None,
+        png_every: 0,
+        max_frames: Some(80),
+        pace: true,
+        fovy: 1.0,
+        max_speed: 2.0,
+        max_turn: 2.0,
+    };
+    let mut rebuilt = false;
+    let s = walk(&cfg, &mut |done, _| {
+        if done == 20 && !rebuilt {
+            rebuilt = true;
+            let glb = dir.path().join("other.glb");
+            assert!(
+                portico(&[
+                    "generate",
+                    "--preset",
+                    "tiny",
+                    "--seed",
+                    "9",
+                    "-o",
+                    glb.to_str().unwrap()
+                ])
+                .status()
+                .unwrap()
+                .success()
+            );
+            assert!(
+                portico(&["build", glb.to_str().unwrap(), "-o", db.to_str().unwrap()])
+                    .status()
+                    .unwrap()
+                    .success()
+            );
+            for (p, _, log) in &replicas {
+                assert!(
+                    Command::new("kill")
+                        .args(["-HUP", &p.0.id().to_string()])
+                        .status()
+                        .unwrap()
+                        .success()
+                );
+                // The replica says when it serves the new file (bounded wait).
+                let reloaded = std::iter::from_fn(|| {
+                    log.recv_timeout(std::time::Duration::from_secs(10)).ok()
+                })
+                .find(|l| l.starts_with("serving "));
+                assert!(reloaded.is_some(), "no reload line");
+            }
+        }
+    })
+    .unwrap();
+    assert!(rebuilt);
+    assert!(
+        s.database_changed,
+        "the walk did not notice the new database"
+    );
+    assert!(
+        s.io_failures <= 3,
+        "{} IO failures: a refetch loop",
+        s.io_failures
+    );
+
+    // The new database under its own names: fresh bytes, never the cached old ones.
+    let new_id = manifest_id(&http);
+    assert_ne!(new_id, old_id);
+    let fresh = portico_data::Database::open(&db)
+        .unwrap()
+        .segment(1)
+        .unwrap();
+    rt.block_on(async {
+        let r = http
+            .get(seg_url(&new_id))
+            .bearer_auth(TOKEN)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 200);
+        assert_eq!(r.bytes().await.unwrap(), fresh);
+        // The old name is gone at the replicas (410), whatever an old cache entry holds.
+        let direct = format!("http://{}/v1/db/{old_id}/segments/2", addrs[0]);
+        assert_eq!(
+            http.get(&direct)
+                .bearer_auth(TOKEN)
+                .send()
+                .await
+                .unwrap()
+                .status(),
+            410
+        );
+    });
+    // And a new walk reads the new database without a failure.
+    let s = walk(
+        &WalkConfig {
+            max_frames: Some(30),
+            ..cfg
+        },
+        &mut |_, _| {},
+    )
+    .unwrap();
+    assert_eq!(s.io_failures, 0);
+    assert!(!s.database_changed && s.segments_read > 0);
+    // No token in nginx's access log, whatever the query strings held.
+    let log = std::fs::read_to_string(dir.path().join("nginx/access.log")).unwrap();
+    assert!(!log.contains(TOKEN), "a token reached the access log");
 }

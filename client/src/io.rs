@@ -79,7 +79,7 @@ impl Fetcher for Http {
             Ok(got
                 .into_iter()
                 .map(|(id, bytes)| {
-                    let item = me.decode(id, &bytes).map(|p| (p, bytes.len() as u64));
+                    let item = bytes.and_then(|b| me.decode(id, &b).map(|p| (p, b.len() as u64)));
                     (id, item)
                 })
                 .collect())

@@ -8,12 +8,21 @@ use portico_data::format::Header;
 use portico_protocol::{BINCODE_MIME, Manifest, PrefetchRequest, PrefetchResponse};
 use std::time::Duration;
 
+/// The server no longer serves the database the client's URLs name (it was rebuilt and
+/// reloaded): `410 Gone`. Asking again cannot help; the walk must start over on the new one.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct Stale(pub String);
+
 /// A server the client talks to.
 #[derive(Debug, Clone)]
 pub struct Remote {
     base: String,
     token: Option<String>,
     http: reqwest::Client,
+    /// The database id of the manifest fetched (segment URLs name it, so no cache serves
+    /// another file's bytes); `None` before any manifest.
+    database: std::sync::Arc<std::sync::RwLock<Option<String>>>,
 }
 
 impl Remote {
@@ -28,6 +37,7 @@ impl Remote {
             base: base.trim_end_matches('/').to_string(),
             token,
             http,
+            database: Default::default(),
         })
     }
 
@@ -61,16 +71,33 @@ impl Remote {
             let msg = serde_json::from_slice::<portico_protocol::ApiError>(&body)
                 .map(|e| e.message)
                 .unwrap_or_else(|_| String::from_utf8_lossy(&body).into_owned());
+            if status == reqwest::StatusCode::GONE {
+                return Err(Stale(format!("{}: {what}: {msg}", self.base)).into());
+            }
             bail!("{}: {what}: {status}: {msg}", self.base);
         }
         Ok(body)
     }
 
+    /// Where segments are read and prefetch asked: `/v1/db/{database_id}` once a manifest named
+    /// the database (content-named URLs: immutable, and 410 Gone once the server has moved on
+    /// to a rebuilt file), `/v1` before.
+    fn segments_base(&self) -> String {
+        match self.database.read().ok().and_then(|d| d.clone()) {
+            Some(id) => format!("/v1/db/{id}"),
+            None => "/v1".to_string(),
+        }
+    }
+
     /// `GET /v1/manifest`.
     pub async fn manifest(&self) -> Result<Manifest<Header>> {
         let b = self.fetch(self.get("/v1/manifest"), "manifest").await?;
-        portico_protocol::manifest_from_bincode(&b)
-            .with_context(|| format!("{}: manifest does not decode", self.base))
+        let m: Manifest<Header> = portico_protocol::manifest_from_bincode(&b)
+            .with_context(|| format!("{}: manifest does not decode", self.base))?;
+        if let Ok(mut d) = self.database.write() {
+            *d = Some(m.database_id.clone());
+        }
+        Ok(m)
     }
 
     /// `GET /v1/cells` (ask only when the manifest's header has cells).
@@ -80,34 +107,39 @@ impl Remote {
             .map_err(|e| anyhow::anyhow!("{}: cell graph {e}", self.base))
     }
 
-    /// `GET /v1/segments/{id}`.
+    /// `GET /v1/db/{database_id}/segments/{id}`.
     pub async fn segment(&self, id: u32) -> Result<Bytes> {
-        self.fetch(
-            self.get(&format!("/v1/segments/{id}")),
-            &format!("segment {id}"),
-        )
-        .await
+        let url = format!("{}/segments/{id}", self.segments_base());
+        self.fetch(self.get(&url), &format!("segment {id}")).await
     }
 
-    /// `GET /v1/batch?ids=...`: several segments in one round trip, in the order asked.
-    pub async fn batch(&self, ids: &[u32]) -> Result<Vec<(u32, Bytes)>> {
+    /// `GET /v1/db/{database_id}/batch?ids=...`: several segments in one round trip, in the
+    /// order asked; a segment the server could not read fails alone.
+    pub async fn batch(&self, ids: &[u32]) -> Result<Vec<(u32, Result<Bytes>)>> {
         let list: Vec<String> = ids.iter().map(u32::to_string).collect();
         let what = format!("batch of {} segments", ids.len());
-        let body = self
-            .fetch(
-                self.get(&format!("/v1/batch?ids={}", list.join(","))),
-                &what,
-            )
-            .await?;
-        parse_batch(&body).with_context(|| format!("{}: {what}", self.base))
+        let url = format!("{}/batch?ids={}", self.segments_base(), list.join(","));
+        let body = self.fetch(self.get(&url), &what).await?;
+        let parts = portico_protocol::batch::parse(&body)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("{}: {what}", self.base))?;
+        Ok(parts
+            .into_iter()
+            .map(|(id, range)| {
+                let bytes = range.map(|r| body.slice(r)).with_context(|| {
+                    format!("{}: segment {id} is damaged on the server", self.base)
+                });
+                (id, bytes)
+            })
+            .collect())
     }
 
-    /// `POST /v1/prefetch`.
+    /// `POST /v1/db/{database_id}/prefetch`.
     pub async fn prefetch(&self, req: &PrefetchRequest) -> Result<PrefetchResponse> {
         let body = portico_protocol::to_bincode(req)?;
         let mut r = self
             .http
-            .post(format!("{}/v1/prefetch", self.base))
+            .post(format!("{}{}/prefetch", self.base, self.segments_base()))
             .header("content-type", BINCODE_MIME)
             .header("accept", BINCODE_MIME)
             .body(body);
@@ -119,56 +151,10 @@ impl Remote {
     }
 }
 
-/// Splits a `/v1/batch` body: per segment its id (`u32` LE), its length (`u64` LE) and its
-/// bytes (slices of the body, not copies).
-pub fn parse_batch(body: &Bytes) -> Result<Vec<(u32, Bytes)>> {
-    let mut out = Vec::new();
-    let mut at = 0usize;
-    while at < body.len() {
-        let head = body
-            .get(at..at + 12)
-            .context("batch body truncated in a segment header")?;
-        let id = u32::from_le_bytes(head[..4].try_into()?);
-        let len = usize::try_from(u64::from_le_bytes(head[4..].try_into()?))?;
-        let start = at + 12;
-        let end = start
-            .checked_add(len)
-            .filter(|&e| e <= body.len())
-            .with_context(|| format!("batch body truncated in segment {id}"))?;
-        out.push((id, body.slice(start..end)));
-        at = end;
-    }
-    Ok(out)
-}
-
 /// Fetches a server's cell graph from synchronous code (e.g. to make a path before a walk).
 pub fn cells_blocking(remote: &Remote) -> Result<CellGraph> {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
     rt.block_on(remote.cells())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn batch_bodies_split_into_their_segments_and_truncation_is_an_error() {
-        let mut b = Vec::new();
-        for (id, data) in [(7u32, &b"abc"[..]), (2, &b""[..]), (9, &b"xy"[..])] {
-            b.extend_from_slice(&id.to_le_bytes());
-            b.extend_from_slice(&(data.len() as u64).to_le_bytes());
-            b.extend_from_slice(data);
-        }
-        let body = Bytes::from(b);
-        let parts = parse_batch(&body).unwrap();
-        let ids: Vec<u32> = parts.iter().map(|p| p.0).collect();
-        assert_eq!(ids, vec![7, 2, 9]);
-        assert_eq!(&parts[0].1[..], b"abc");
-        assert_eq!(&parts[2].1[..], b"xy");
-        assert!(parse_batch(&body.slice(..body.len() - 1)).is_err());
-        assert!(parse_batch(&body.slice(..5)).is_err());
-        assert!(parse_batch(&Bytes::new()).unwrap().is_empty());
-    }
 }

@@ -63,6 +63,10 @@ pub enum Event<B> {
     },
     /// A request failed (the walk goes on; a later list may ask again).
     Failed(String),
+    /// The server no longer serves the database this client reads (rebuilt and reloaded): the
+    /// IO stage has stopped, rather than fetch another file's segments by the old ids. The walk
+    /// goes on with what it holds.
+    Stale(String),
 }
 
 /// How the driver talks to the server.
@@ -258,6 +262,10 @@ pub async fn drive<F: Fetcher>(
                         s.refresh(resp.items.iter().map(|i| i.segment).collect(), at);
                         Event::Answer(Box::new(resp))
                     }
+                    Ok((_, _, Err(e))) if e.downcast_ref::<crate::net::Stale>().is_some() => {
+                        let _ = tx.send(Event::Stale(format!("{e:#}"))).await;
+                        break;
+                    }
                     Ok((_, _, Err(e))) => Event::Failed(format!("{e:#}")),
                     Err(e) => Event::Failed(format!("prefetch task: {e}")),
                 }
@@ -274,6 +282,12 @@ pub async fn drive<F: Fetcher>(
                         (ids, Err(anyhow::anyhow!("read task: {e}")))
                     }
                 };
+                if let Err(e) = &got
+                    && e.downcast_ref::<crate::net::Stale>().is_some()
+                {
+                    let _ = tx.send(Event::Stale(format!("{e:#}"))).await;
+                    break;
+                }
                 if deliver(&mut s, ids, got, &mut seq, &tx).await.is_err() {
                     break;
                 }

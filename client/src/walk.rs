@@ -120,6 +120,10 @@ pub struct WalkSummary {
     pub fetch_latency_s: Series,
     /// IO failures (logged, not fatal).
     pub io_failures: u64,
+    /// The server stopped serving the walk's database (rebuilt and reloaded): reading stopped
+    /// there, and the rest of the walk drew what it held.
+    #[serde(default)]
+    pub database_changed: bool,
     /// Calibrated cost model.
     pub cost_model: CostModel,
     /// Final online correction factor.
@@ -387,6 +391,7 @@ struct Walker<'a> {
     too_big: std::collections::HashSet<u32>,
     latencies: Vec<f64>,
     failures: u64,
+    database_changed: bool,
     segments_read: u64,
     bytes_read: u64,
     last_frame_s: Option<f64>,
@@ -407,6 +412,7 @@ impl<'a> Walker<'a> {
             too_big: std::collections::HashSet::new(),
             latencies: Vec::new(),
             failures: 0,
+            database_changed: false,
             segments_read: 0,
             bytes_read: 0,
             last_frame_s: None,
@@ -450,6 +456,11 @@ impl<'a> Walker<'a> {
                 Event::Failed(e) => {
                     self.failures += 1;
                     tracing::warn!("io: {e}");
+                }
+                Event::Stale(e) => {
+                    self.failures += 1;
+                    self.database_changed = true;
+                    tracing::warn!("io stopped: {e}");
                 }
             }
         }
@@ -658,6 +669,7 @@ impl<'a> Walker<'a> {
             bytes_read: self.bytes_read,
             fetch_latency_s: Series::of(&self.latencies),
             io_failures: self.failures,
+            database_changed: self.database_changed,
             cost_model: self.cost,
             cost_factor: self.online.factor(),
             wall_s,

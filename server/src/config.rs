@@ -5,8 +5,8 @@ use std::time::Duration;
 /// What a server instance allows and requires.
 #[derive(Debug, Clone)]
 pub struct Config {
-    /// Bearer token every `/v1/*` request must carry (`Authorization: Bearer …`, or `?token=`
-    /// for WebSocket clients that cannot set headers). `None` = no auth.
+    /// Bearer token every `/v1/*` request must carry in `Authorization: Bearer …` (a WebSocket
+    /// upgrade of `/v1/stream` may give it as `?token=`, which browsers need). `None` = no auth.
     pub token: Option<String>,
     /// Largest request body accepted (bytes); larger bodies get 413.
     pub max_body_bytes: usize,
@@ -20,6 +20,22 @@ pub struct Config {
     pub request_timeout: Duration,
     /// A stream session that sends nothing for this long is closed.
     pub idle_timeout: Duration,
+    /// A stream session whose client takes longer than this to take one message is closed
+    /// (a client that never reads cannot keep its slot).
+    pub write_timeout: Duration,
+    /// Deadline of one prefetch computation, waiting for a compute slot included.
+    pub compute_deadline: Duration,
+    /// Prefetch computations at once (default: one per core).
+    pub compute_slots: usize,
+    /// Most open connections (default: below the process's file-descriptor limit); more are
+    /// answered 503 and closed.
+    pub max_connections: usize,
+    /// Time a client has to send a request's headers (and an idle keep-alive connection to
+    /// start its next request) before the connection is closed.
+    pub header_timeout: Duration,
+    /// How long requests in flight may finish after a stop or reload before their connections
+    /// are closed.
+    pub drain: Duration,
 }
 
 impl Default for Config {
@@ -32,6 +48,12 @@ impl Default for Config {
             max_batch: 1024,
             request_timeout: Duration::from_secs(30),
             idle_timeout: Duration::from_secs(60),
+            write_timeout: Duration::from_secs(10),
+            compute_deadline: Duration::from_millis(250),
+            compute_slots: std::thread::available_parallelism().map_or(2, |n| n.get()),
+            max_connections: crate::listen::default_max_connections(),
+            header_timeout: Duration::from_secs(10),
+            drain: Duration::from_secs(10),
         }
     }
 }

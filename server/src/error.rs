@@ -1,5 +1,6 @@
 //! Every failure becomes an HTTP status with a JSON [`ApiError`] body, so a client (or a person
-//! with curl) always learns what was wrong; the server keeps serving everyone else.
+//! with curl) always learns what was wrong; the server keeps serving everyone else. Internal
+//! details (file paths, OS errors) go to the log, never into a body.
 
 use axum::Json;
 use axum::http::StatusCode;
@@ -49,18 +50,41 @@ impl Error {
     }
 }
 
+impl Error {
+    /// A 500 whose detail goes to the log, not to the client (file paths, OS errors).
+    pub fn internal(what: &str, detail: impl std::fmt::Display) -> Error {
+        tracing::error!("{what}: {detail}");
+        Error::new(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "internal",
+            format!("{what} (see the server log)"),
+        )
+    }
+}
+
 impl From<portico_data::DataError> for Error {
     fn from(e: portico_data::DataError) -> Error {
+        use portico_data::DataError as D;
         match e {
-            portico_data::DataError::NotFound(m) => Error::not_found(m),
-            other => {
-                tracing::error!("database error: {other}");
+            D::NotFound(m) => Error::not_found(m),
+            D::Deadline(spent) => Error::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "busy",
+                format!(
+                    "the answer took longer than the server allows ({} ms); retry",
+                    spent.as_millis()
+                ),
+            ),
+            // The message names what is damaged (a segment, a stab list), never the file.
+            D::Corrupt { path, what } => {
+                tracing::error!("{}: corrupt: {what}", path.display());
                 Error::new(
                     StatusCode::INTERNAL_SERVER_ERROR,
-                    "database",
-                    other.to_string(),
+                    "damaged",
+                    format!("damaged data on the server: {what}"),
                 )
             }
+            other => Error::internal("the server could not read its database", other),
         }
     }
 }

@@ -1,14 +1,20 @@
-//! The Portico server (DESIGN §4): axum + tokio over a memory-mapped, read-only display
-//! database. It serves the immutable parts of the file (manifest, cell graph, segments) as
-//! zero-copy slices of the map with strong ETags, answers predictive prefetch requests
-//! (Funkhouser §5.2) over HTTP, and pushes segments in need order over a WebSocket.
+//! The Portico server: axum + tokio over a memory-mapped, read-only display database. It serves
+//! the file's parts (manifest, cell graph, segments) as zero-copy slices of the map with strong
+//! ETags under URLs that name the database, answers predictive prefetch requests (Funkhouser
+//! §5.2) over HTTP, and pushes segments in need order over a WebSocket.
 //!
 //! Stateless apart from stream sessions, so any number of replicas can serve one file behind a
 //! load balancer or cache. No global lock on the hot path: the database is read-only, decoded
-//! stab lists sit in `OnceLock`s, and metrics are atomics.
+//! stab lists sit in `OnceLock`s, and metrics are atomics. Hostile or unlucky clients are
+//! bounded everywhere: CPU work runs on compute slots with a deadline ([`compute`]), connections
+//! are capped and must send their headers in time ([`listen`]), stream sessions compute only
+//! their latest observer and time out writes ([`stream`]), and every error is JSON ([`guard`]).
 
+pub mod compute;
 pub mod config;
 pub mod error;
+pub mod guard;
+pub mod listen;
 pub mod metrics;
 pub mod routes;
 pub mod state;
@@ -35,9 +41,12 @@ pub fn router(state: Arc<AppState>) -> Router {
     // (and a timer per segment request costs measurable throughput).
     let api = Router::new()
         .route("/v1/prefetch", post(routes::prefetch))
+        .route("/v1/db/{db}/prefetch", post(routes::prefetch_in))
         .layer(timeout)
         .route("/v1/manifest", get(routes::manifest))
         .route("/v1/cells", get(routes::cells))
+        .route("/v1/db/{db}/segments/{id}", get(routes::segment_in))
+        .route("/v1/db/{db}/batch", get(routes::batch_in))
         .route("/v1/segments/{id}", get(routes::segment))
         .route("/v1/batch", get(routes::batch))
         .route("/v1/stream", get(stream::upgrade));
@@ -53,10 +62,13 @@ pub fn router(state: Arc<AppState>) -> Router {
         .fallback(routes::fallback)
         .layer(DefaultBodyLimit::max(state.config.max_body_bytes))
         .layer(track::TrackLayer::new(state.clone()))
+        .layer(guard::GuardLayer)
         .with_state(state)
 }
 
-/// Bearer-token check for `/v1/*` when a token is configured.
+/// Bearer-token check for `/v1/*` when a token is configured: the `Authorization` header, and
+/// for the WebSocket upgrade of `/v1/stream` only (browsers cannot set headers there) a
+/// `?token=` query. A query token anywhere else is refused: query strings end up in access logs.
 async fn auth(State(s): State<Arc<AppState>>, req: Request, next: Next) -> Response {
     let Some(token) = &s.config.token else {
         return next.run(req).await;
@@ -66,9 +78,10 @@ async fn auth(State(s): State<Arc<AppState>>, req: Request, next: Next) -> Respo
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.strip_prefix("Bearer "));
-    let from_query = req
-        .uri()
-        .query()
+    let upgrade = req.uri().path() == "/v1/stream" && req.headers().contains_key(header::UPGRADE);
+    let from_query = upgrade
+        .then(|| req.uri().query())
+        .flatten()
         .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")));
     let given = from_header.or(from_query).unwrap_or("");
     if constant_time_eq(given.as_bytes(), token.as_bytes()) {
@@ -77,7 +90,7 @@ async fn auth(State(s): State<Arc<AppState>>, req: Request, next: Next) -> Respo
         error::Error::new(
             StatusCode::UNAUTHORIZED,
             "unauthorized",
-            "a valid bearer token is required",
+            "a valid bearer token is required in the Authorization header",
         )
         .into_response()
     }
@@ -87,18 +100,17 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
-/// Serves until `shutdown` completes, then closes stream sessions and drains requests.
+/// Serves until `shutdown` completes, then drains (see [`listen::run`]): for tests and
+/// embedders that need no reload.
 pub async fn serve(
     state: Arc<AppState>,
     listener: tokio::net::TcpListener,
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
-    let app = router(state.clone());
-    let notify = state.clone();
-    axum::serve(listener, app)
-        .with_graceful_shutdown(async move {
-            shutdown.await;
-            let _ = notify.shutdown.send(true);
-        })
-        .await
+    let (tx, rx) = tokio::sync::mpsc::unbounded_channel();
+    tokio::spawn(async move {
+        shutdown.await;
+        let _ = tx.send(listen::Control::Stop);
+    });
+    listen::run(listener, state, rx, |_, _| {}).await
 }

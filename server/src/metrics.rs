@@ -41,6 +41,8 @@ pub struct Metrics {
     pub stream_dropped: AtomicU64,
     /// Prefetch answers computed (HTTP and stream).
     pub prefetch_answers: AtomicU64,
+    /// Connections over the cap, answered 503 and closed.
+    pub refused_connections: AtomicU64,
 }
 
 /// Index of a route name in [`ROUTES`] (`other` when unknown).
@@ -127,7 +129,7 @@ impl Metrics {
             let _ = writeln!(s, "portico_request_seconds_sum{{route=\"{name}\"}} {sum}");
             let _ = writeln!(s, "portico_request_seconds_count{{route=\"{name}\"}} {n}");
         }
-        let gauges: [(&str, &str, &str, i64); 6] = [
+        let gauges: [(&str, &str, &str, i64); 7] = [
             (
                 "portico_bytes_sent_total",
                 "counter",
@@ -163,6 +165,12 @@ impl Metrics {
                 "counter",
                 "Prefetch answers computed.",
                 self.prefetch_answers.load(Relaxed) as i64,
+            ),
+            (
+                "portico_refused_connections_total",
+                "counter",
+                "Connections over the cap, answered 503.",
+                self.refused_connections.load(Relaxed) as i64,
             ),
         ];
         for (name, kind, help, v) in gauges {

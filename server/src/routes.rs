@@ -1,19 +1,27 @@
-//! The HTTP handlers (DESIGN §4): health, metrics, manifest, cells, segments (single, ranged,
-//! batched) and prefetch. Segment bytes go out as `Bytes` slices of the memory map: no copy.
+//! The HTTP handlers: health, metrics, manifest, cells, segments (single, ranged, batched) and
+//! prefetch. Segment bytes go out as `Bytes` slices of the memory map: no copy. Segment URLs
+//! name the database they come from (`/v1/db/{database_id}/…`), so they are immutable and no
+//! cache anywhere can serve stale bytes after a rebuild.
 
 use crate::error::Error;
 use crate::state::AppState;
 use axum::body::{Body, Bytes};
-use axum::extract::rejection::BytesRejection;
+use axum::extract::rejection::{BytesRejection, QueryRejection};
 use axum::extract::{Path, Query, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use portico_protocol::{BINCODE_MIME, JSON_MIME, PROTOCOL_VERSION, PrefetchRequest};
+use portico_protocol::{BINCODE_MIME, JSON_MIME, PROTOCOL_VERSION, PrefetchRequest, batch};
 use std::collections::HashSet;
 use std::sync::Arc;
 
-/// Cache-Control of everything that never changes for a given file.
+/// Cache-Control of answers whose URL names the database they come from
+/// (`/v1/db/{database_id}/…`): they never change, so any cache may keep them for ever.
 pub const IMMUTABLE: &str = "public, max-age=31536000, immutable";
+/// Cache-Control of answers whose URL does not name the database (the manifest, the cell graph,
+/// `/v1/segments/{id}`): a rebuild changes them, so caches must revalidate (ETag, 304).
+pub const REVALIDATE: &str = "no-cache";
+/// Largest read budget a prefetch request may ask for (bytes).
+pub const MAX_READ_BYTES: u64 = 1 << 30;
 
 type Shared = State<Arc<AppState>>;
 
@@ -61,23 +69,24 @@ fn encoded(bincode: bool, bytes: Bytes, etag: Option<&str>) -> Response {
     r
 }
 
-/// `GET /v1/manifest`: the segment table and the model header.
+/// `GET /v1/manifest`: the segment table and the model header. Short-lived: a rebuild changes it,
+/// so it is revalidated (`no-cache`, an ETag per encoding, 304).
 pub async fn manifest(State(s): Shared, headers: HeaderMap) -> Response {
-    let tag = format!("m-{}", s.database_id);
-    if not_modified(&headers, &format!("\"{tag}\"")) {
-        return StatusCode::NOT_MODIFIED.into_response();
-    }
     let b = wants_bincode(&headers);
+    let tag = format!("\"m-{}-{}\"", s.database_id, if b { "b" } else { "j" });
+    if not_modified(&headers, &tag) {
+        return revalidated(StatusCode::NOT_MODIFIED.into_response(), &tag);
+    }
     let body = if b {
         s.manifest_bincode.clone()
     } else {
         s.manifest_json()
     };
-    encoded(b, body, Some(&tag))
+    revalidated(encoded(b, body, None), &tag)
 }
 
 /// `GET /v1/cells`: the compact cell graph (cell boxes, portals, adjacency, k-D tree). Bincode
-/// clients get the stored segment bytes as they are.
+/// clients get the stored segment bytes as they are. Revalidated like the manifest.
 pub async fn cells(State(s): Shared, headers: HeaderMap) -> Result<Response, Error> {
     let Some(c) = &s.db().header().cells else {
         return Err(Error::not_found(
@@ -85,12 +94,43 @@ pub async fn cells(State(s): Shared, headers: HeaderMap) -> Result<Response, Err
         ));
     };
     let b = wants_bincode(&headers);
+    let tag = format!("\"c-{}-{}\"", s.database_id, if b { "b" } else { "j" });
+    if not_modified(&headers, &tag) {
+        return Ok(revalidated(StatusCode::NOT_MODIFIED.into_response(), &tag));
+    }
     let body = if b {
         s.db().segment(c.graph_segment)?
     } else {
         s.cells_json()
     };
-    Ok(encoded(b, body, Some(&format!("c-{}", s.database_id))))
+    Ok(revalidated(encoded(b, body, None), &tag))
+}
+
+/// Adds a (quoted) ETag and `no-cache`, and `Vary: Accept` (the encoding depends on it).
+fn revalidated(mut r: Response, tag: &str) -> Response {
+    if let Ok(v) = HeaderValue::from_str(tag) {
+        r.headers_mut().insert(header::ETAG, v);
+    }
+    let h = r.headers_mut();
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static(REVALIDATE));
+    h.insert(header::VARY, HeaderValue::from_static("accept"));
+    r
+}
+
+/// Checks that a content-named URL names the database being served: a client or cache still
+/// on a rebuilt file's URLs gets 410 Gone, never another file's bytes.
+fn current(s: &AppState, db: &str) -> Result<(), Error> {
+    if db == s.database_id {
+        return Ok(());
+    }
+    Err(Error::new(
+        StatusCode::GONE,
+        "stale",
+        format!(
+            "database {db} is no longer served (now {}); fetch /v1/manifest again",
+            s.database_id
+        ),
+    ))
 }
 
 fn parse_id(raw: &str, s: &AppState) -> Result<u32, Error> {
@@ -106,11 +146,15 @@ fn parse_id(raw: &str, s: &AppState) -> Result<u32, Error> {
     Ok(id)
 }
 
+/// `If-None-Match` with the weak comparison RFC 9110 §13.1.2 prescribes for it: `W/"x"` matches
+/// `"x"`.
 fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
+    let strip = |t: &str| t.trim().trim_start_matches("W/").to_string();
+    let etag = strip(etag);
     headers
         .get(header::IF_NONE_MATCH)
         .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.split(',').any(|t| t.trim() == etag || t.trim() == "*"))
+        .is_some_and(|v| v.split(',').any(|t| strip(t) == etag || t.trim() == "*"))
 }
 
 /// A `Range` header that cannot be served (answered with 416).
@@ -154,21 +198,41 @@ pub fn parse_range(value: &str, len: u64) -> Result<Option<(u64, u64)>, Unsatisf
     Ok(Some(range))
 }
 
-/// `GET /v1/segments/{id}`: the segment's bytes straight from the map, with a strong ETag,
-/// immutable caching, conditional requests and single byte ranges.
+/// `GET /v1/db/{database_id}/segments/{id}`: the segment's bytes straight from the map, with a
+/// strong ETag (its xxh3), immutable caching, conditional requests and single byte ranges. The
+/// URL names the database, so no cache can ever serve another file's bytes for it.
+pub async fn segment_in(
+    State(s): Shared,
+    Path((db, raw)): Path<(String, String)>,
+    req: axum::extract::Request,
+) -> Result<Response, Error> {
+    current(&s, &db)?;
+    segment_answer(&s, &raw, req.headers(), IMMUTABLE)
+}
+
+/// `GET /v1/segments/{id}`: the same bytes under a URL that a rebuild reuses, so caches must
+/// revalidate it (`no-cache` with the ETag). For people and scripts; clients use
+/// [`segment_in`].
 pub async fn segment(
     State(s): Shared,
     Path(raw): Path<String>,
     req: axum::extract::Request,
 ) -> Result<Response, Error> {
-    // The request itself rather than a `HeaderMap` extractor, which would copy every header.
-    let headers = req.headers();
-    let id = parse_id(&raw, &s)?;
+    segment_answer(&s, &raw, req.headers(), REVALIDATE)
+}
+
+fn segment_answer(
+    s: &AppState,
+    raw: &str,
+    headers: &HeaderMap,
+    cache: &'static str,
+) -> Result<Response, Error> {
+    let id = parse_id(raw, s)?;
     let entry = s.db().segments()[id as usize];
     let etag = &s.etags[id as usize];
     let mut builder = Response::builder()
         .header(header::ETAG, etag.clone())
-        .header(header::CACHE_CONTROL, HeaderValue::from_static(IMMUTABLE))
+        .header(header::CACHE_CONTROL, HeaderValue::from_static(cache))
         .header(header::ACCEPT_RANGES, HeaderValue::from_static("bytes"))
         .header("x-portico-kind", HeaderValue::from(entry.kind));
     if not_modified(headers, etag.to_str().unwrap_or("")) {
@@ -210,22 +274,39 @@ pub async fn segment(
         .unwrap_or_default())
 }
 
-/// Query of `GET /v1/batch`.
+/// Query of the batch reads.
 #[derive(Debug, serde::Deserialize)]
 pub struct BatchQuery {
     /// Comma-separated segment ids.
     pub ids: String,
 }
 
-/// `GET /v1/batch?ids=3,4,9`: several segments in one answer (cell-granularity reads). The body
-/// is, per segment, its id (`u32` LE), its length (`u64` LE) and its bytes, streamed from the
-/// map without copying. The answer is immutable for a given id list.
-pub async fn batch(State(s): Shared, Query(q): Query<BatchQuery>) -> Result<Response, Error> {
+type BatchParams = Result<Query<BatchQuery>, QueryRejection>;
+
+/// `GET /v1/db/{database_id}/batch?ids=3,4,9`: several segments in one answer (framed as
+/// [`portico_protocol::batch`] says), streamed from the map without copying; immutable. A segment
+/// the server cannot read (damaged on disk) is marked missing and fails alone.
+pub async fn batch_in(
+    State(s): Shared,
+    Path(db): Path<String>,
+    q: BatchParams,
+) -> Result<Response, Error> {
+    current(&s, &db)?;
+    batch_answer(&s, q, IMMUTABLE)
+}
+
+/// `GET /v1/batch?ids=…`: the same under a URL a rebuild reuses (revalidated).
+pub async fn batch(State(s): Shared, q: BatchParams) -> Result<Response, Error> {
+    batch_answer(&s, q, REVALIDATE)
+}
+
+fn batch_answer(s: &AppState, q: BatchParams, cache: &'static str) -> Result<Response, Error> {
+    let Query(q) = q.map_err(|e| Error::bad_request(e.body_text()))?;
     let ids: Vec<u32> = q
         .ids
         .split(',')
         .filter(|t| !t.is_empty())
-        .map(|t| parse_id(t.trim(), &s))
+        .map(|t| parse_id(t.trim(), s))
         .collect::<Result<_, _>>()?;
     if ids.is_empty() || ids.len() > s.config.max_batch {
         return Err(Error::bad_request(format!(
@@ -237,20 +318,28 @@ pub async fn batch(State(s): Shared, Query(q): Query<BatchQuery>) -> Result<Resp
     let mut chunks = Vec::with_capacity(ids.len() * 2);
     let mut total = 0u64;
     for id in ids {
-        let bytes = s.db().segment(id)?;
-        let mut head = Vec::with_capacity(12);
-        head.extend_from_slice(&id.to_le_bytes());
-        head.extend_from_slice(&(bytes.len() as u64).to_le_bytes());
-        total += 12 + bytes.len() as u64;
-        s.metrics.sent(bytes.len() as u64);
-        chunks.push(Ok::<_, std::io::Error>(Bytes::from(head)));
-        chunks.push(Ok(bytes));
+        match s.db().segment(id) {
+            Ok(bytes) => {
+                total += (batch::HEAD_BYTES + bytes.len()) as u64;
+                s.metrics.sent(bytes.len() as u64);
+                let head = batch::entry_head(id, bytes.len() as u64);
+                chunks.push(Ok::<_, std::io::Error>(Bytes::copy_from_slice(&head)));
+                chunks.push(Ok(bytes));
+            }
+            Err(e) => {
+                // Logged with its detail; the client learns only that this one is missing.
+                let _ = Error::from(e);
+                total += batch::HEAD_BYTES as u64;
+                let head = batch::entry_head(id, batch::MISSING);
+                chunks.push(Ok(Bytes::copy_from_slice(&head)));
+            }
+        }
     }
     let body = Body::from_stream(futures_util::stream::iter(chunks));
     Ok(Response::builder()
         .header(header::CONTENT_TYPE, "application/x-portico-batch")
         .header(header::CONTENT_LENGTH, total)
-        .header(header::CACHE_CONTROL, IMMUTABLE)
+        .header(header::CACHE_CONTROL, cache)
         .body(body)
         .unwrap_or_default())
 }
@@ -278,66 +367,120 @@ pub fn decode_body<T: serde::de::DeserializeOwned>(
     r.map_err(|e| Error::bad_request(format!("request body does not decode: {e}")))
 }
 
-/// Checks a prefetch request's numbers, so hostile values cannot make the answer huge or slow.
-pub fn validate(req: &PrefetchRequest) -> Result<HashSet<u32>, Error> {
+/// Checks a prefetch request's numbers, so hostile values cannot make the answer huge or slow:
+/// finite, non-negative observer and policy numbers, a bounded depth, screen and read budget, and
+/// a held set of at most `segments` ids, each below `segments`.
+pub fn validate(req: &PrefetchRequest, segments: usize) -> Result<HashSet<u32>, Error> {
     if req.version != PROTOCOL_VERSION {
         return Err(Error::bad_request(format!(
             "protocol version {} is not supported (server speaks {PROTOCOL_VERSION})",
             req.version
         )));
     }
-    let o = &req.observer;
+    validate_observer(&req.observer)?;
+    validate_policy(&req.policy)?;
+    let held = portico_protocol::decode_held(&req.held)
+        .ok_or_else(|| Error::bad_request("held set is not a valid delta-coded id list"))?;
+    if held.len() > segments {
+        return Err(Error::bad_request(format!(
+            "the held set lists {} ids; the database has {segments} segments",
+            held.len()
+        )));
+    }
+    if let Some(bad) = held.iter().find(|&&id| id as usize >= segments) {
+        return Err(Error::bad_request(format!(
+            "held segment {bad} does not exist (the database has {segments})"
+        )));
+    }
+    Ok(held.into_iter().collect())
+}
+
+/// An observer's numbers are finite, its angles and speeds not negative.
+pub fn validate_observer(o: &portico_protocol::Observer) -> Result<(), Error> {
     let floats = o.eye.iter().chain(&o.dir).chain(&o.up).chain(&o.velocity);
-    let scalars = [
-        o.half_fov_x,
-        o.half_fov_y,
-        o.max_speed,
-        o.max_turn,
-        req.policy.frame_time_s,
-        req.policy.size_threshold_px,
-    ];
+    let scalars = [o.half_fov_x, o.half_fov_y, o.max_speed, o.max_turn];
     if floats.chain(&scalars).any(|x| !x.is_finite()) || scalars.iter().any(|&x| x < 0.0) {
         return Err(Error::bad_request(
-            "observer and policy numbers must be finite and not negative",
+            "observer numbers must be finite, its angles and speeds not negative",
         ));
     }
-    let p = &req.policy;
+    Ok(())
+}
+
+/// A policy's numbers are finite and within bounds.
+pub fn validate_policy(p: &portico_protocol::Policy) -> Result<(), Error> {
+    let scalars = [p.frame_time_s, p.size_threshold_px];
+    if scalars.iter().any(|x| !x.is_finite() || *x < 0.0) {
+        return Err(Error::bad_request(
+            "policy numbers must be finite and not negative",
+        ));
+    }
     if p.depth_frames > 100_000 || p.screen.iter().any(|&d| d == 0 || d > 32_768) {
         return Err(Error::bad_request(
             "depth_frames ≤ 100000 and a screen of 1..=32768 pixels per side",
         ));
     }
-    let held = portico_protocol::decode_held(&req.held)
-        .ok_or_else(|| Error::bad_request("held set is not a valid delta-coded id list"))?;
-    Ok(held.into_iter().collect())
+    if p.read_bytes > MAX_READ_BYTES {
+        return Err(Error::bad_request(format!(
+            "read_bytes {} is more than {MAX_READ_BYTES}",
+            p.read_bytes
+        )));
+    }
+    Ok(())
 }
 
-/// `POST /v1/prefetch`: Funkhouser §5.2's lookahead for one observer.
+/// `POST /v1/db/{database_id}/prefetch`: [`prefetch`] for a client that reads that database
+/// (its answer names that database's segments); 410 Gone once it is no longer served.
+pub async fn prefetch_in(
+    State(s): Shared,
+    Path(db): Path<String>,
+    headers: HeaderMap,
+    body: Result<Bytes, BytesRejection>,
+) -> Result<Response, Error> {
+    current(&s, &db)?;
+    prefetch(State(s), headers, body).await
+}
+
+/// `POST /v1/prefetch`: Funkhouser §5.2's lookahead for one observer. Decoding, checking,
+/// answering and encoding run on a compute slot within the prefetch deadline
+/// ([`crate::compute`]), never on the async workers.
 pub async fn prefetch(
     State(s): Shared,
     headers: HeaderMap,
     body: Result<Bytes, BytesRejection>,
 ) -> Result<Response, Error> {
     let body = body.map_err(|e| Error::new(e.status(), "body", e.body_text()))?;
-    let req: PrefetchRequest = decode_body(&headers, &body)?;
-    let held = validate(&req)?;
-    let answer = s.prefetcher.answer(&req.observer, &req.policy, &held)?;
-    s.metrics
-        .prefetch_answers
-        .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let b = wants_bincode(&headers);
-    let bytes = if b {
-        portico_protocol::to_bincode(&answer).map_err(|e| Error::bad_request(e.to_string()))?
-    } else {
-        serde_json::to_vec(&answer).map_err(|e| Error::bad_request(e.to_string()))?
-    };
+    let state = s.clone();
+    let bytes = s
+        .compute
+        .run(move |budget| {
+            let req: PrefetchRequest = decode_body(&headers, &body)?;
+            let held = validate(&req, state.db().segments().len())?;
+            let answer =
+                state
+                    .prefetcher
+                    .answer_within(&req.observer, &req.policy, &held, &budget)?;
+            state
+                .metrics
+                .prefetch_answers
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            if b {
+                portico_protocol::to_bincode(&answer)
+                    .map_err(|e| Error::internal("the answer does not encode", e))
+            } else {
+                serde_json::to_vec(&answer)
+                    .map_err(|e| Error::internal("the answer does not encode", e))
+            }
+        })
+        .await?;
     Ok(encoded(b, Bytes::from(bytes), None))
 }
 
 /// Any other path.
 pub async fn fallback() -> Error {
     Error::not_found(
-        "no such endpoint; see /v1/manifest, /v1/cells, /v1/segments/{id}, /v1/batch, /v1/prefetch, /v1/stream",
+        "no such endpoint; see /v1/manifest, /v1/cells, /v1/db/{database_id}/segments/{id}, /v1/db/{database_id}/batch, /v1/prefetch, /v1/stream",
     )
 }
 

@@ -1,6 +1,7 @@
 //! What every handler shares: the database (through the prefetcher), precomputed answers for
-//! the immutable documents, limits, metrics, and the session gate.
+//! the immutable documents, limits, the compute slots, metrics, and the session gate.
 
+use crate::compute::Compute;
 use crate::config::Config;
 use crate::metrics::Metrics;
 use bytes::Bytes;
@@ -16,6 +17,8 @@ pub struct AppState {
     pub prefetcher: Prefetcher,
     /// Limits and options.
     pub config: Config,
+    /// Where prefetch answers are computed (off the async workers, within a deadline).
+    pub compute: Compute,
     /// Counters and histograms.
     pub metrics: Metrics,
     /// Strong identifier of the file's contents (the manifest's ETag).
@@ -67,6 +70,7 @@ impl AppState {
         Ok(Arc::new(AppState {
             etags,
             prefetcher: Prefetcher::new(db)?,
+            compute: Compute::new(config.compute_slots, config.compute_deadline),
             config,
             metrics: Metrics::default(),
             database_id,

@@ -115,9 +115,9 @@ fn route_name(path: &str) -> &'static str {
         "/metrics" => "metrics",
         "/v1/manifest" => "manifest",
         "/v1/cells" => "cells",
-        "/v1/segments/{id}" => "segment",
-        "/v1/batch" => "batch",
-        "/v1/prefetch" => "prefetch",
+        "/v1/segments/{id}" | "/v1/db/{db}/segments/{id}" => "segment",
+        "/v1/batch" | "/v1/db/{db}/batch" => "batch",
+        "/v1/prefetch" | "/v1/db/{db}/prefetch" => "prefetch",
         "/v1/stream" => "stream",
         _ => "other",
     }

@@ -2,91 +2,16 @@
 //! endpoint, the error answers, auth, metrics, the WebSocket stream and graceful shutdown.
 
 use futures_util::{SinkExt, StreamExt};
-use portico_data::Database;
-use portico_data::build::{BuildOptions, Quiet, build};
 use portico_data::format::Header;
-use portico_data::import::import_file;
 use portico_protocol::{
-    ApiError, BINCODE_MIME, Manifest, Observer, PROTOCOL_VERSION, Policy, PrefetchRequest,
-    PrefetchResponse, ServerFrame, StreamClient, StreamServer,
+    ApiError, BINCODE_MIME, Manifest, PROTOCOL_VERSION, PrefetchResponse, ServerFrame,
+    StreamClient, StreamServer,
 };
-use portico_server::{AppState, Config};
-use std::path::PathBuf;
-use std::sync::{Arc, OnceLock};
+use portico_server::Config;
 use tokio_tungstenite::tungstenite::Message;
 
-/// The tiny building's database, built once per test binary.
-fn db_path() -> &'static PathBuf {
-    static PATH: OnceLock<PathBuf> = OnceLock::new();
-    PATH.get_or_init(|| {
-        let params = portico_generator::Params {
-            preset: portico_generator::Preset::Tiny,
-            seed: 1,
-            floors: Some(1),
-        };
-        let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
-        let dir = tempfile::tempdir().unwrap().keep();
-        let glb = dir.join("tiny.glb");
-        std::fs::write(&glb, &b.glb).unwrap();
-        let out = dir.join("tiny.portico");
-        build(
-            import_file(&glb).unwrap(),
-            &out,
-            &BuildOptions::default(),
-            &Quiet,
-        )
-        .unwrap();
-        out
-    })
-}
-
-struct Running {
-    base: String,
-    state: Arc<AppState>,
-    stop: Option<tokio::sync::oneshot::Sender<()>>,
-    task: tokio::task::JoinHandle<std::io::Result<()>>,
-}
-
-async fn start(config: Config) -> Running {
-    let state = AppState::open(db_path(), config).unwrap();
-    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-    let base = format!("http://{}", listener.local_addr().unwrap());
-    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
-    let task = tokio::spawn(portico_server::serve(state.clone(), listener, async move {
-        let _ = rx.await;
-    }));
-    Running {
-        base,
-        state,
-        stop: Some(tx),
-        task,
-    }
-}
-
-fn observer(db: &Database) -> Observer {
-    let g = db.cell_graph().unwrap().unwrap();
-    let c = g.cells.iter().find(|c| c.live).unwrap();
-    let mid = |k: usize| (c.bounds.min[k] + c.bounds.max[k]) * 0.5;
-    Observer {
-        eye: [mid(0), mid(1), mid(2)],
-        dir: [1.0, 0.0, 0.0],
-        up: [0.0, 1.0, 0.0],
-        velocity: [0.0; 3],
-        half_fov_x: 0.6,
-        half_fov_y: 0.45,
-        max_speed: 1.5,
-        max_turn: 1.0,
-    }
-}
-
-fn request(db: &Database) -> PrefetchRequest {
-    PrefetchRequest {
-        version: PROTOCOL_VERSION,
-        observer: observer(db),
-        policy: Policy::default(),
-        held: Vec::new(),
-    }
-}
+mod common;
+use common::{request, start};
 
 #[tokio::test]
 async fn manifest_cells_and_segments_are_served_from_the_map() {
@@ -106,37 +31,61 @@ async fn manifest_cells_and_segments_are_served_from_the_map() {
         portico_protocol::manifest_from_bincode(&r.bytes().await.unwrap()).unwrap();
     assert_eq!(m.header, *db.header());
     assert_eq!(m.segments.len(), db.segments().len());
-    // Manifest, JSON, and conditional.
-    let j: serde_json::Value = http
-        .get(format!("{}/v1/manifest", s.base))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
-    assert_eq!(j["database_id"], m.database_id);
+    // Manifest, JSON, and conditional: revalidated (a rebuild changes it), one ETag per
+    // encoding, weak comparison.
+    assert!(
+        r_cache_control(&http, &format!("{}/v1/manifest", s.base))
+            .await
+            .contains("no-cache")
+    );
     let r = http
         .get(format!("{}/v1/manifest", s.base))
-        .header("if-none-match", &etag)
         .send()
         .await
         .unwrap();
-    assert_eq!(r.status(), 304);
-    // Cells: bincode is the stored graph.
+    assert_ne!(
+        r.headers()["etag"].to_str().unwrap(),
+        etag,
+        "JSON and bincode share an ETag"
+    );
+    let j: serde_json::Value = r.json().await.unwrap();
+    assert_eq!(j["database_id"], m.database_id);
+    for tag in [etag.clone(), format!("W/{etag}")] {
+        let r = http
+            .get(format!("{}/v1/manifest", s.base))
+            .header("accept", BINCODE_MIME)
+            .header("if-none-match", &tag)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 304, "{tag}");
+    }
+    // Cells: bincode is the stored graph; conditional too.
     let r = http
         .get(format!("{}/v1/cells", s.base))
         .header("accept", BINCODE_MIME)
         .send()
         .await
         .unwrap();
+    let cells_tag = r.headers()["etag"].to_str().unwrap().to_string();
     let g: portico_data::cells::CellGraph =
         portico_data::format::decode_segment(&r.bytes().await.unwrap()).unwrap();
     assert_eq!(Some(g), db.cell_graph().unwrap());
-    // A segment, whole and ranged, with caching headers.
+    let r = http
+        .get(format!("{}/v1/cells", s.base))
+        .header("accept", BINCODE_MIME)
+        .header("if-none-match", &cells_tag)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 304);
+    // A segment under its content-named URL, whole and ranged: immutable.
     let lod = db.header().lods_of(&db.header().instances[0])[0];
     let want = db.segment(lod.segment).unwrap();
-    let url = format!("{}/v1/segments/{}", s.base, lod.segment);
+    let url = format!(
+        "{}/v1/db/{}/segments/{}",
+        s.base, m.database_id, lod.segment
+    );
     let r = http.get(&url).send().await.unwrap();
     assert_eq!(r.status(), 200);
     assert!(
@@ -177,28 +126,45 @@ async fn manifest_cells_and_segments_are_served_from_the_map() {
             .status(),
         416
     );
-    // Batched.
+    // The URL a rebuild reuses is revalidated, never immutable; another database's URL is gone.
+    let plain = format!("{}/v1/segments/{}", s.base, lod.segment);
+    assert_eq!(r_cache_control(&http, &plain).await, "no-cache");
+    let stale = format!(
+        "{}/v1/db/0000000000000000ffffffffffffffff/segments/{}",
+        s.base, lod.segment
+    );
+    let e = error_of(http.get(&stale).send().await.unwrap(), 410).await;
+    assert_eq!(e.code, "stale");
+    // Batched, framed as the protocol says.
     let ids = [lod.segment, 0, lod.segment];
     let r = http
         .get(format!(
-            "{}/v1/batch?ids={},{},{}",
-            s.base, ids[0], ids[1], ids[2]
+            "{}/v1/db/{}/batch?ids={},{},{}",
+            s.base, m.database_id, ids[0], ids[1], ids[2]
         ))
         .send()
         .await
         .unwrap();
+    assert!(
+        r.headers()["cache-control"]
+            .to_str()
+            .unwrap()
+            .contains("immutable")
+    );
     let body = r.bytes().await.unwrap();
-    let mut at = 0;
-    for id in ids {
-        let got = u32::from_le_bytes(body[at..at + 4].try_into().unwrap());
-        let len = u64::from_le_bytes(body[at + 4..at + 12].try_into().unwrap()) as usize;
+    let parts = portico_protocol::batch::parse(&body).unwrap();
+    assert_eq!(parts.len(), 3);
+    for ((got, range), id) in parts.into_iter().zip(ids) {
         assert_eq!(got, id);
-        assert_eq!(&body[at + 12..at + 12 + len], &db.segment(id).unwrap()[..]);
-        at += 12 + len;
+        assert_eq!(&body[range.unwrap()], &db.segment(id).unwrap()[..]);
     }
-    assert_eq!(at, body.len());
     s.stop.unwrap().send(()).unwrap();
     s.task.await.unwrap().unwrap();
+}
+
+async fn r_cache_control(http: &reqwest::Client, url: &str) -> String {
+    let r = http.get(url).send().await.unwrap();
+    r.headers()["cache-control"].to_str().unwrap().to_string()
 }
 
 async fn error_of(r: reqwest::Response, status: u16) -> ApiError {
@@ -231,6 +197,30 @@ async fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
     error_of(get("/v1/batch?ids=1,2,3,4,5").await.unwrap(), 400).await;
     error_of(get("/v1/batch?ids=").await.unwrap(), 400).await;
     error_of(get("/no/such/thing").await.unwrap(), 404).await;
+    // Every error is JSON: axum's 405, the query extractor's rejection, an oversized target or
+    // header block (the guard layer).
+    let e = error_of(
+        http.delete(format!("{}/v1/manifest", s.base))
+            .send()
+            .await
+            .unwrap(),
+        405,
+    )
+    .await;
+    assert_eq!(e.code, "method_not_allowed");
+    error_of(get("/v1/batch").await.unwrap(), 400).await;
+    let long = format!("/v1/batch?ids={}", "1,".repeat(5000));
+    assert_eq!(
+        error_of(get(&long).await.unwrap(), 414).await.code,
+        "uri_too_long"
+    );
+    let big = http
+        .get(format!("{}/healthz", s.base))
+        .header("x-junk", "j".repeat(20 << 10))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(error_of(big, 431).await.code, "headers_too_large");
     let post = |body: Vec<u8>, ct: &'static str| {
         http.post(format!("{}/v1/prefetch", s.base))
             .header("content-type", ct)
@@ -304,37 +294,62 @@ async fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
 }
 
 #[tokio::test]
-async fn a_token_guards_the_api_but_not_health() {
+async fn a_token_guards_every_api_route_but_not_health() {
     let s = start(Config {
         token: Some("s3cret".into()),
         ..Config::default()
     })
     .await;
     let http = reqwest::Client::new();
-    let url = format!("{}/v1/manifest", s.base);
-    error_of(http.get(&url).send().await.unwrap(), 401).await;
-    error_of(
-        http.get(&url).bearer_auth("wrong").send().await.unwrap(),
-        401,
-    )
-    .await;
-    assert_eq!(
-        http.get(&url)
-            .bearer_auth("s3cret")
-            .send()
-            .await
-            .unwrap()
-            .status(),
-        200
-    );
-    assert_eq!(
-        http.get(format!("{url}?token=s3cret"))
-            .send()
-            .await
-            .unwrap()
-            .status(),
-        200
-    );
+    let id = s.state.database_id.clone();
+    let routes = [
+        "/v1/manifest".to_string(),
+        "/v1/cells".to_string(),
+        "/v1/segments/0".to_string(),
+        "/v1/batch?ids=0".to_string(),
+        format!("/v1/db/{id}/segments/0"),
+        format!("/v1/db/{id}/batch?ids=0"),
+    ];
+    for r in &routes {
+        let url = format!("{}{r}", s.base);
+        error_of(http.get(&url).send().await.unwrap(), 401).await;
+        error_of(
+            http.get(&url).bearer_auth("wrong").send().await.unwrap(),
+            401,
+        )
+        .await;
+        // A query token is refused on plain HTTP routes: query strings end up in access logs.
+        let q = if r.contains('?') { "&" } else { "?" };
+        error_of(
+            http.get(format!("{url}{q}token=s3cret"))
+                .send()
+                .await
+                .unwrap(),
+            401,
+        )
+        .await;
+        assert_eq!(
+            http.get(&url)
+                .bearer_auth("s3cret")
+                .send()
+                .await
+                .unwrap()
+                .status(),
+            200,
+            "{r}"
+        );
+    }
+    let post = http.post(format!("{}/v1/prefetch", s.base)).body("{}");
+    error_of(post.send().await.unwrap(), 401).await;
+    // The WebSocket upgrade: refused without a token, accepted with `?token=` (browsers cannot
+    // set headers on it).
+    let ws = s.base.replace("http://", "ws://");
+    let refused = tokio_tungstenite::connect_async(format!("{ws}/v1/stream")).await;
+    assert!(refused.is_err(), "a stream without a token was accepted");
+    let (mut sock, _) = tokio_tungstenite::connect_async(format!("{ws}/v1/stream?token=s3cret"))
+        .await
+        .expect("a stream with the query token");
+    let _ = sock.close(None).await;
     assert_eq!(
         http.get(format!("{}/healthz", s.base))
             .send()
@@ -419,4 +434,62 @@ async fn the_stream_pushes_needed_segments_and_survives_vanishing_clients() {
             break;
         }
     }
+}
+
+/// A damaged segment on disk fails alone: a batch that holds it still brings the others (it is
+/// marked missing), and its own error says what is damaged without the server's file path.
+#[tokio::test]
+async fn a_damaged_segment_fails_alone_and_no_error_names_a_file() {
+    let db = common::db_path();
+    let copy = tempfile::tempdir().unwrap();
+    let path = copy.path().join("damaged.portico");
+    let mut bytes = std::fs::read(db).unwrap();
+    let d = portico_data::Database::open(db).unwrap();
+    let lod = d.header().lods_of(&d.header().instances[0])[0];
+    let entry = d.segments()[lod.segment as usize];
+    bytes[entry.offset as usize + entry.length as usize / 2] ^= 0xff;
+    std::fs::write(&path, &bytes).unwrap();
+    let s = common::start_on(&path, Config::default()).await;
+    let http = reqwest::Client::new();
+    let good = (0..d.segments().len() as u32)
+        .find(|&i| i != lod.segment)
+        .unwrap();
+    let r = http
+        .get(format!(
+            "{}/v1/db/{}/batch?ids={good},{},{good}",
+            s.base, s.state.database_id, lod.segment
+        ))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 200);
+    let body = r.bytes().await.unwrap();
+    let parts = portico_protocol::batch::parse(&body).unwrap();
+    assert_eq!(parts.len(), 3);
+    assert!(
+        parts[0].1.is_some() && parts[1].1.is_none() && parts[2].1.is_some(),
+        "{parts:?}"
+    );
+    assert_eq!(
+        &body[parts[0].1.clone().unwrap()],
+        &d.segment(good).unwrap()[..]
+    );
+    let e = error_of(
+        http.get(format!("{}/v1/segments/{}", s.base, lod.segment))
+            .send()
+            .await
+            .unwrap(),
+        500,
+    )
+    .await;
+    assert!(
+        e.message.contains(&format!("segment {}", lod.segment)),
+        "{}",
+        e.message
+    );
+    assert!(
+        !e.message.contains(".portico") && !e.message.contains('/'),
+        "a path in {}",
+        e.message
+    );
 }

@@ -1,9 +1,11 @@
-//! `portico serve FILE.portico [--listen ADDR] [--token T] [limits]`: the streaming server
-//! (DESIGN §4). Binds to loopback unless told otherwise; stops cleanly on Ctrl-C or SIGTERM;
-//! on SIGHUP drains the requests in flight and reopens the file (a rebuild renamed a new file
-//! over it: the old map stays valid until its last reader is done, never remapped under them).
+//! `portico serve FILE.portico [--listen ADDR] [--token T] [limits]`: the streaming server.
+//! Binds to loopback unless told otherwise; on Ctrl-C or SIGTERM stops accepting and drains for
+//! at most 10 s; on SIGHUP reopens the file (a rebuild renamed a new file over it) and serves it
+//! to new connections at once, while the old connections finish on the old map (valid until its
+//! last reader is done, never remapped under them) and are closed after 10 s.
 
 use anyhow::{Context, Result};
+use portico_server::listen::{self, Control, Drained};
 use portico_server::{AppState, Config};
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -36,6 +38,13 @@ pub struct Args {
     /// Worker threads (default: one per core).
     #[arg(long)]
     threads: Option<usize>,
+    /// Deadline of one prefetch answer, milliseconds (past it the request gets a 503).
+    #[arg(long, default_value_t = 250)]
+    prefetch_deadline_ms: u64,
+    /// After SIGTERM or SIGHUP, seconds the requests in flight have to finish before their
+    /// connections are closed.
+    #[arg(long, default_value_t = 10)]
+    drain_secs: u64,
 }
 
 /// Opens the database and serves until interrupted.
@@ -46,9 +55,11 @@ pub fn run(a: Args) -> Result<()> {
         max_session_rate: (a.session_rate_mb * 1e6).max(1.0) as u64,
         max_body_bytes: a.max_body_kb.max(1) << 10,
         request_timeout: Duration::from_secs(a.timeout.max(1)),
+        compute_deadline: Duration::from_millis(a.prefetch_deadline_ms.max(1)),
+        drain: Duration::from_secs(a.drain_secs),
         ..Config::default()
     };
-    let mut state = AppState::open(&a.file, config.clone())?;
+    let state = AppState::open(&a.file, config.clone())?;
     let mut rt = tokio::runtime::Builder::new_multi_thread();
     if let Some(n) = a.threads {
         rt.worker_threads(n.max(1));
@@ -61,66 +72,68 @@ pub fn run(a: Args) -> Result<()> {
         .with_context(|| format!("cannot listen on {}", a.listen))?;
     listener.set_nonblocking(true)?;
     let addr = listener.local_addr()?;
-    // Signals are watched once for the whole life of the process and queued, so one that
-    // arrives while a reload drains or reopens is not lost.
-    let mut signals = rt.block_on(async { watch_signals() })?;
-    loop {
-        let db = state.db();
-        eprintln!(
-            "serving {} ({} segments, {:.1} MB, id {}) on http://{addr}",
-            db.header().name,
-            db.segments().len(),
-            db.file_len() as f64 / 1e6,
-            state.database_id
-        );
-        let l = listener.try_clone()?;
-        let stop = rt.block_on(serve_until_signal(state.clone(), l, &mut signals))?;
-        if stop == Stop::Quit {
-            break;
+    announce(&state, addr);
+    tracing::info!(
+        "limits: {} connections, {} s to send headers, {} compute slots with a {} ms deadline",
+        config.max_connections,
+        config.header_timeout.as_secs(),
+        config.compute_slots,
+        config.compute_deadline.as_millis()
+    );
+    let drain = config.drain;
+    rt.block_on(async move {
+        // Signals are watched once for the whole life of the process and queued, so one that
+        // arrives while a reload drains or reopens is not lost.
+        let mut signals = watch_signals()?;
+        let (control, rx) = tokio::sync::mpsc::unbounded_channel();
+        let listener = tokio::net::TcpListener::from_std(listener)?;
+        let server = tokio::spawn(listen::run(listener, state, rx, move |reload, d: Drained| {
+            let what = if reload { "reload" } else { "stop" };
+            if d.closed == 0 && d.sessions_left == 0 {
+                eprintln!("{what}: {} connections finished their requests", d.finished);
+            } else {
+                eprintln!(
+                    "{what}: {} connections finished; {} still busy after {} s were closed; {} stream sessions left",
+                    d.finished, d.closed, drain.as_secs(), d.sessions_left
+                );
+            }
+        }));
+        while let Some(signal) = signals.recv().await {
+            match signal {
+                Stop::Quit => break,
+                // SIGHUP: a rebuild renamed a new file over the old one. New connections get it
+                // at once; the old map stays valid until its last request is done. If it does
+                // not open, say why and keep serving the old one.
+                Stop::Reload => match AppState::open(&a.file, config.clone()) {
+                    Ok(new) => {
+                        let (swapped, done) = tokio::sync::oneshot::channel();
+                        let _ = control.send(Control::Reload(new.clone(), swapped));
+                        if done.await.is_ok() {
+                            announce(&new, addr);
+                        }
+                    }
+                    Err(e) => eprintln!("reload failed, still serving the previous file: {e}"),
+                },
+            }
         }
-        // SIGHUP: the requests in flight have drained against the old map; open the file
-        // again (a rebuild renamed a new inode over it) and go on. If it does not open, say
-        // why and keep serving the old one.
-        match AppState::open(&a.file, config.clone()) {
-            Ok(new) => state = new,
-            Err(e) => eprintln!("reload failed, still serving the previous file: {e}"),
-        }
-    }
+        let _ = control.send(Control::Stop);
+        server.await??;
+        anyhow::Ok(())
+    })?;
     eprintln!("stopped");
     Ok(())
 }
 
-/// How long requests in flight may take to finish after a stop or reload signal before their
-/// connections are dropped (a slow client must not hold a reload up for ever).
-const DRAIN: Duration = Duration::from_secs(10);
-
-/// Serves `state` on `listener` until a signal arrives, then drains for at most [`DRAIN`].
-async fn serve_until_signal(
-    state: std::sync::Arc<AppState>,
-    listener: std::net::TcpListener,
-    signals: &mut tokio::sync::mpsc::UnboundedReceiver<Stop>,
-) -> Result<Stop> {
-    let listener = tokio::net::TcpListener::from_std(listener)?;
-    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
-    let mut server = tokio::spawn(portico_server::serve(state, listener, async move {
-        let _ = stop_rx.await;
-    }));
-    let stop = tokio::select! {
-        s = signals.recv() => s.unwrap_or(Stop::Quit),
-        done = &mut server => {
-            done??;
-            return Ok(Stop::Quit);
-        }
-    };
-    let _ = stop_tx.send(());
-    match tokio::time::timeout(DRAIN, &mut server).await {
-        Ok(done) => done??,
-        Err(_) => {
-            eprintln!("requests still running after {DRAIN:?}: closing their connections");
-            server.abort();
-        }
-    }
-    Ok(stop)
+/// Says what is served where.
+fn announce(state: &AppState, addr: SocketAddr) {
+    let db = state.db();
+    eprintln!(
+        "serving {} ({} segments, {:.1} MB, id {}) on http://{addr}",
+        db.header().name,
+        db.segments().len(),
+        db.file_len() as f64 / 1e6,
+        state.database_id
+    );
 }
 
 /// What a signal asks the server to do.

@@ -240,7 +240,7 @@ impl Client {
                     self.last_answer = Some(a);
                     self.result.answers.push(a);
                 }
-                Event::Failed(e) => {
+                Event::Failed(e) | Event::Stale(e) => {
                     self.result.failures += 1;
                     tracing::warn!("loadtest io: {e}");
                 }
@@ -573,11 +573,14 @@ impl Fetcher for Linked {
         async move {
             me.pipe.send().await;
             let got = me.remote.batch(&ids).await?;
-            let total = got.iter().map(|(_, b)| 12 + b.len() as u64).sum();
+            let total = got
+                .iter()
+                .map(|(_, b)| 12 + b.as_ref().map_or(0, |b| b.len() as u64))
+                .sum();
             me.pipe.deliver(total).await;
             Ok(got
                 .into_iter()
-                .map(|(id, b)| (id, Ok(((), b.len() as u64))))
+                .map(|(id, b)| (id, b.map(|b| ((), b.len() as u64))))
                 .collect())
         }
     }

@@ -1,0 +1,120 @@
+//! CPU-bound work (prefetch answers, request decoding) off the async workers.
+//!
+//! The async workers only move bytes; a prefetch answer (Funkhouser §5.2's lookahead) is
+//! computed on tokio's blocking pool, at most [`Compute::slots`] at a time, with a deadline that
+//! the computation itself checks ([`portico_data::prefetch::Budget`]): waiting for a slot counts
+//! against it, and when it passes the request gets a 503 and the worker is free again. So a
+//! flood of requests slows those requests, never `/healthz` or segment reads.
+
+use crate::error::Error;
+use axum::http::StatusCode;
+use portico_data::prefetch::Budget;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::sync::Semaphore;
+
+/// The compute slots and the deadline of each computation.
+#[derive(Debug, Clone)]
+pub struct Compute {
+    slots: Arc<Semaphore>,
+    deadline: Duration,
+    count: usize,
+}
+
+impl Compute {
+    /// `slots` computations at a time (one per core is the right number: more only queue on the
+    /// CPU), each stopped after `deadline` counted from when it was asked for.
+    pub fn new(slots: usize, deadline: Duration) -> Compute {
+        Compute {
+            slots: Arc::new(Semaphore::new(slots.max(1))),
+            deadline,
+            count: slots.max(1),
+        }
+    }
+
+    /// How many computations run at once.
+    pub fn slots(&self) -> usize {
+        self.count
+    }
+
+    /// Runs `f` on the blocking pool within the deadline; `f` gets the [`Budget`] to check.
+    pub async fn run<T, F>(&self, f: F) -> Result<T, Error>
+    where
+        T: Send + 'static,
+        F: FnOnce(Budget) -> Result<T, Error> + Send + 'static,
+    {
+        let until = Instant::now() + self.deadline;
+        let busy = || {
+            Error::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "busy",
+                format!(
+                    "the server could not compute this answer within {} ms; retry",
+                    self.deadline.as_millis()
+                ),
+            )
+        };
+        let permit =
+            match tokio::time::timeout_at(until.into(), self.slots.clone().acquire_owned()).await {
+                Ok(Ok(p)) => p,
+                _ => return Err(busy()),
+            };
+        let job = tokio::task::spawn_blocking(move || {
+            let _slot = permit;
+            f(Budget::until(until))
+        });
+        match job.await {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::error!("a computation failed: {e}");
+                Err(Error::new(
+                    StatusCode::INTERNAL_SERVER_ERROR,
+                    "internal",
+                    "the computation failed (see the server log)",
+                ))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[tokio::test]
+    async fn a_computation_past_its_deadline_is_stopped_and_frees_its_slot() {
+        let c = Compute::new(1, Duration::from_millis(50));
+        let t0 = Instant::now();
+        let r: Result<(), Error> = c
+            .run(|b| {
+                loop {
+                    b.check().map_err(Error::from)?;
+                    std::thread::sleep(Duration::from_millis(1));
+                }
+            })
+            .await;
+        assert_eq!(r.unwrap_err().status(), StatusCode::SERVICE_UNAVAILABLE);
+        assert!(t0.elapsed() < Duration::from_millis(500));
+        // The slot is free again.
+        assert_eq!(c.run(|_| Ok(7)).await.unwrap(), 7);
+    }
+
+    #[tokio::test]
+    async fn waiting_for_a_slot_counts_against_the_deadline() {
+        let c = Compute::new(1, Duration::from_millis(100));
+        let held = c.clone();
+        let long = tokio::spawn(async move {
+            held.run(|_| {
+                std::thread::sleep(Duration::from_millis(300));
+                Ok(())
+            })
+            .await
+        });
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        let t0 = Instant::now();
+        let r = c.run(|_| Ok(())).await;
+        assert_eq!(r.unwrap_err().status(), StatusCode::SERVICE_UNAVAILABLE);
+        assert!(t0.elapsed() < Duration::from_millis(250));
+        let _ = long.await;
+    }
+}

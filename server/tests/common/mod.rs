@@ -1,0 +1,114 @@
+//! What the server's test binaries share: the tiny building's database, a server on a free
+//! loopback port, and an observer inside a live cell.
+#![allow(dead_code)]
+
+use portico_data::Database;
+use portico_data::build::{BuildOptions, Quiet, build};
+use portico_data::import::import_file;
+use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest};
+use portico_server::{AppState, Config};
+use std::path::PathBuf;
+use std::sync::{Arc, OnceLock};
+
+/// The tiny building's database, built once per test binary.
+pub fn db_path() -> &'static PathBuf {
+    static PATH: OnceLock<PathBuf> = OnceLock::new();
+    PATH.get_or_init(|| {
+        let params = portico_generator::Params {
+            preset: portico_generator::Preset::Tiny,
+            seed: 1,
+            floors: Some(1),
+        };
+        let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
+        let dir = tempfile::tempdir().unwrap().keep();
+        let glb = dir.join("tiny.glb");
+        std::fs::write(&glb, &b.glb).unwrap();
+        let out = dir.join("tiny.portico");
+        build(
+            import_file(&glb).unwrap(),
+            &out,
+            &BuildOptions::default(),
+            &Quiet,
+        )
+        .unwrap();
+        out
+    })
+}
+
+/// The `small` building flattened (about 20 MB of segments: more than any socket buffers hold),
+/// built once per test binary.
+pub fn big_db_path() -> &'static PathBuf {
+    static PATH: OnceLock<PathBuf> = OnceLock::new();
+    PATH.get_or_init(|| {
+        let params = portico_generator::Params {
+            preset: portico_generator::Preset::Small,
+            seed: 1,
+            floors: Some(1),
+        };
+        let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
+        let dir = tempfile::tempdir().unwrap().keep();
+        let glb = dir.join("small.glb");
+        std::fs::write(&glb, &b.glb).unwrap();
+        let out = dir.join("small.portico");
+        let opts = BuildOptions {
+            flatten: true,
+            no_hierarchy: true,
+            ..BuildOptions::default()
+        };
+        build(import_file(&glb).unwrap(), &out, &opts, &Quiet).unwrap();
+        out
+    })
+}
+
+pub struct Running {
+    pub base: String,
+    pub state: Arc<AppState>,
+    pub stop: Option<tokio::sync::oneshot::Sender<()>>,
+    pub task: tokio::task::JoinHandle<std::io::Result<()>>,
+}
+
+pub async fn start(config: Config) -> Running {
+    start_on(db_path(), config).await
+}
+
+/// A server over the database at `path`.
+pub async fn start_on(path: &std::path::Path, config: Config) -> Running {
+    let state = AppState::open(path, config).unwrap();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let base = format!("http://{}", listener.local_addr().unwrap());
+    let (tx, rx) = tokio::sync::oneshot::channel::<()>();
+    let task = tokio::spawn(portico_server::serve(state.clone(), listener, async move {
+        let _ = rx.await;
+    }));
+    Running {
+        base,
+        state,
+        stop: Some(tx),
+        task,
+    }
+}
+
+pub fn observer(db: &Database) -> Observer {
+    let g = db.cell_graph().unwrap().unwrap();
+    let c = g.cells.iter().find(|c| c.live).unwrap();
+    let mid = |k: usize| (c.bounds.min[k] + c.bounds.max[k]) * 0.5;
+    Observer {
+        eye: [mid(0), mid(1), mid(2)],
+        dir: [1.0, 0.0, 0.0],
+        up: [0.0, 1.0, 0.0],
+        velocity: [0.0; 3],
+        half_fov_x: 0.6,
+        half_fov_y: 0.45,
+        max_speed: 1.5,
+        max_turn: 1.0,
+    }
+}
+
+pub fn request(db: &Database) -> PrefetchRequest {
+    PrefetchRequest {
+        version: PROTOCOL_VERSION,
+        observer: observer(db),
+        policy: Policy::default(),
+        held: Vec::new(),
+    }
+}
