@@ -129,6 +129,11 @@ pub fn run(a: Args) -> Result<()> {
     } else {
         print_summary(&summary);
     }
+    if summary.database_changed {
+        eprintln!(
+            "warning: the server's database changed during the walk (rebuilt and reloaded): reading stopped; walk again to see the new one"
+        );
+    }
     if summary.frames > 0 && summary.visible_objects.max <= 0.0 {
         bail!(
             "the walk saw nothing in {} frames: its path ({}) never looks at the model; try --path-kind orbit",
