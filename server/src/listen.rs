@@ -3,8 +3,10 @@
 //! - A client has [`Config::header_timeout`] to send a request's headers (and an idle keep-alive
 //!   connection to start its next request): slow or silent sockets are closed, not kept.
 //! - At most [`Config::max_connections`] connections are open, below the process's
-//!   file-descriptor limit: one more is answered 503 (JSON, `Retry-After`) and closed, so the
-//!   server never runs out of descriptors and keeps answering everyone it has let in.
+//!   file-descriptor limit, so the server never runs out of descriptors. At the cap, the oldest
+//!   connection that has not yet sent a whole request head (a slow or silent socket) is closed
+//!   to make room; only when every connection is a real client is a new one answered 503
+//!   (JSON, `Retry-After`) and closed.
 //! - A reload swaps the database for new connections at once (no pause in accepting); the
 //!   connections of the old generation finish their requests, are asked to close, and after
 //!   [`Config::drain`] are closed. Stream sessions of the old generation are told to end. A stop
@@ -16,13 +18,16 @@ use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
 use hyper_util::server::conn::auto::Builder;
 use hyper_util::server::graceful::GracefulShutdown;
 use hyper_util::service::TowerToHyperService;
+use std::collections::VecDeque;
 use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
 use std::sync::atomic::Ordering::Relaxed;
+use std::task::{Context, Poll};
 use std::time::Duration;
 use tokio::io::AsyncWriteExt;
 use tokio::net::TcpListener;
 use tokio::sync::{Semaphore, mpsc};
-use tokio::task::JoinSet;
+use tokio::task::{AbortHandle, JoinSet};
 
 /// Descriptors kept free for the map, logs, and the answers that refuse connections.
 const RESERVED_FDS: u64 = 64;
@@ -99,6 +104,9 @@ struct Generation {
     router: axum::Router,
     graceful: GracefulShutdown,
     tasks: JoinSet<()>,
+    /// Connections in the order they were accepted, with whether they have sent a whole
+    /// request head yet (pruned as they start or end).
+    waiting: VecDeque<(AbortHandle, Arc<AtomicBool>)>,
 }
 
 impl Generation {
@@ -108,6 +116,23 @@ impl Generation {
             state,
             graceful: GracefulShutdown::new(),
             tasks: JoinSet::new(),
+            waiting: VecDeque::new(),
+        }
+    }
+
+    /// Closes the oldest open connection that has not sent a whole request head; false if
+    /// every connection has. Slowloris sockets go first, real clients (who send their head at
+    /// once) are never shed.
+    fn shed_one(&mut self) -> bool {
+        self.waiting
+            .retain(|(task, started)| !task.is_finished() && !started.load(Relaxed));
+        match self.waiting.pop_front() {
+            Some((task, _)) => {
+                task.abort();
+                self.state.metrics.shed_connections.fetch_add(1, Relaxed);
+                true
+            }
+            None => false,
         }
     }
 
@@ -177,19 +202,37 @@ pub async fn run(
                     }
                 };
                 let _ = stream.set_nodelay(true);
-                let Ok(permit) = slots.clone().try_acquire_owned() else {
+                let permit = match slots.clone().try_acquire_owned() {
+                    Ok(p) => Some(p),
+                    // Full: make room by closing the oldest connection that has not sent one
+                    // whole request head (a slow or silent socket), else refuse this one.
+                    Err(_) if current.shed_one() => tokio::time::timeout(
+                        Duration::from_millis(50),
+                        slots.clone().acquire_owned(),
+                    )
+                    .await
+                    .ok()
+                    .and_then(Result::ok),
+                    Err(_) => None,
+                };
+                let Some(permit) = permit else {
                     current.state.metrics.refused_connections.fetch_add(1, Relaxed);
                     tokio::spawn(refuse(stream));
                     continue;
                 };
-                let service = TowerToHyperService::new(current.router.clone());
+                let started = Arc::new(AtomicBool::new(false));
+                let service = TowerToHyperService::new(Started {
+                    inner: current.router.clone(),
+                    started: started.clone(),
+                });
                 let watcher = current.graceful.watcher();
                 let builder = builder.clone();
-                current.tasks.spawn(async move {
+                let task = current.tasks.spawn(async move {
                     let _slot = permit;
                     let conn = builder.serve_connection_with_upgrades(TokioIo::new(stream), service);
                     let _ = watcher.watch(conn).await;
                 });
+                current.waiting.push_back((task, started));
                 // Reap finished connection tasks so the set does not grow.
                 while current.tasks.try_join_next().is_some() {}
             }
@@ -212,6 +255,31 @@ pub async fn run(
     while draining.join_next().await.is_some() {}
     on_drain(false, last);
     Ok(())
+}
+
+/// The router, noting that its connection has sent a whole request head.
+#[derive(Clone)]
+struct Started<S> {
+    inner: S,
+    started: Arc<AtomicBool>,
+}
+
+impl<S, R> tower::Service<R> for Started<S>
+where
+    S: tower::Service<R>,
+{
+    type Response = S::Response;
+    type Error = S::Error;
+    type Future = S::Future;
+
+    fn poll_ready(&mut self, cx: &mut Context<'_>) -> Poll<Result<(), S::Error>> {
+        self.inner.poll_ready(cx)
+    }
+
+    fn call(&mut self, req: R) -> S::Future {
+        self.started.store(true, Relaxed);
+        self.inner.call(req)
+    }
 }
 
 /// Answers a connection over the cap with a 503 and closes it.

@@ -43,6 +43,8 @@ pub struct Metrics {
     pub prefetch_answers: AtomicU64,
     /// Connections over the cap, answered 503 and closed.
     pub refused_connections: AtomicU64,
+    /// Connections closed at the cap to make room: the oldest that had not sent a request.
+    pub shed_connections: AtomicU64,
 }
 
 /// Index of a route name in [`ROUTES`] (`other` when unknown).
@@ -129,7 +131,7 @@ impl Metrics {
             let _ = writeln!(s, "portico_request_seconds_sum{{route=\"{name}\"}} {sum}");
             let _ = writeln!(s, "portico_request_seconds_count{{route=\"{name}\"}} {n}");
         }
-        let gauges: [(&str, &str, &str, i64); 7] = [
+        let gauges: [(&str, &str, &str, i64); 8] = [
             (
                 "portico_bytes_sent_total",
                 "counter",
@@ -171,6 +173,12 @@ impl Metrics {
                 "counter",
                 "Connections over the cap, answered 503.",
                 self.refused_connections.load(Relaxed) as i64,
+            ),
+            (
+                "portico_shed_connections_total",
+                "counter",
+                "Connections without a request closed at the cap to make room.",
+                self.shed_connections.load(Relaxed) as i64,
             ),
         ];
         for (name, kind, help, v) in gauges {

@@ -223,8 +223,9 @@ async fn sessions_that_never_read_lose_their_slots() {
 }
 
 /// Fault 3: sockets that never finish their headers used to stay open for ever (300 of them
-/// exhausted the descriptors). Now they are closed after the header timeout, and connections
-/// over the cap are answered 503 at once.
+/// exhausted the descriptors). Now they are closed after the header timeout; at the connection
+/// cap the oldest of them makes room for a new client, and only when every connection is a
+/// real client is a new one answered 503 at once.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn slow_headers_are_timed_out_and_connections_are_capped() {
     let _one = SERIAL.lock().await;
@@ -266,7 +267,8 @@ async fn slow_headers_are_timed_out_and_connections_are_capped() {
     drop(slow);
     stops_in_time(s).await;
 
-    // The cap: with room for 20 connections, 30 idle sockets leave 10 answered 503 at once.
+    // The cap (20 connections): 30 silent sockets fit, the oldest 10 being closed to make room,
+    // and /healthz still gets in ...
     let s = start(Config {
         max_connections: 20,
         header_timeout: Duration::from_secs(30),
@@ -274,32 +276,59 @@ async fn slow_headers_are_timed_out_and_connections_are_capped() {
     })
     .await;
     let addr = s.base.trim_start_matches("http://").to_string();
-    let mut held = Vec::new();
-    let mut refused = 0;
-    for _ in 0..30 {
-        let mut c = std::net::TcpStream::connect(&addr).unwrap();
-        c.set_read_timeout(Some(Duration::from_millis(300)))
-            .unwrap();
+    let silent: Vec<std::net::TcpStream> = (0..30)
+        .map(|_| {
+            let c = std::net::TcpStream::connect(&addr).unwrap();
+            std::thread::sleep(Duration::from_millis(5));
+            c
+        })
+        .collect();
+    let health = |addr: &str| -> Option<Vec<u8>> {
+        let mut c = std::net::TcpStream::connect(addr).ok()?;
+        c.set_read_timeout(Some(Duration::from_secs(2))).ok()?;
+        c.write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+            .ok()?;
         let mut head = [0u8; 12];
-        if c.read_exact(&mut head).is_ok() {
-            assert!(
-                head.starts_with(b"HTTP/1.1 503"),
-                "{}",
-                String::from_utf8_lossy(&head)
-            );
-            refused += 1;
-        }
-        held.push(c);
-    }
-    assert_eq!(refused, 10);
+        c.read_exact(&mut head).ok()?;
+        Some(head.to_vec())
+    };
+    assert!(health(&addr).unwrap().starts_with(b"HTTP/1.1 200"));
+    let metrics = &s.state.metrics;
     assert_eq!(
-        s.state
-            .metrics
+        metrics
+            .shed_connections
+            .load(std::sync::atomic::Ordering::Relaxed),
+        11
+    );
+    let mut closed = 0;
+    for mut c in silent {
+        c.set_read_timeout(Some(Duration::from_millis(200)))
+            .unwrap();
+        let mut b = [0u8; 1];
+        if matches!(c.read(&mut b), Ok(0)) {
+            closed += 1;
+        }
+    }
+    assert_eq!(closed, 11, "the oldest silent sockets are the ones closed");
+    // ... but 20 clients that have sent requests are never shed: a 21st is answered 503 at once.
+    let busy: Vec<std::net::TcpStream> = (0..20)
+        .map(|_| {
+            let mut c = std::net::TcpStream::connect(&addr).unwrap();
+            c.write_all(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
+                .unwrap();
+            let mut head = [0u8; 12];
+            c.read_exact(&mut head).unwrap();
+            c
+        })
+        .collect();
+    assert!(health(&addr).unwrap().starts_with(b"HTTP/1.1 503"));
+    assert_eq!(
+        metrics
             .refused_connections
             .load(std::sync::atomic::Ordering::Relaxed),
-        10
+        1
     );
-    drop(held);
+    drop(busy);
     stops_in_time(s).await;
 }
 

@@ -1,0 +1,225 @@
+#!/usr/bin/env python3
+"""Hostile and unlucky clients against a running `portico serve`, with /healthz watched.
+
+    python3 bench/attacks.py --server http://127.0.0.1:7878 --pid PID [--attack all]
+
+Attacks (each for --seconds, one after the other):
+  flood         2 WebSocket clients send ~142 KB of Observer messages each, then leave
+  never-read    200 WebSocket clients ask for everything and never read (server RSS reported)
+  slow-headers  300 sockets send half a request head and wait
+  held          4 loops of prefetch requests whose held set lists 400,000 ids (0.8 MB)
+  reload        a slow reader of a large batch, then SIGHUP to --pid
+For each: /healthz latency (p50, p99, max; a request that fails counts as 5 s) polled every 20 ms
+on fresh connections from its own thread, and the server's RSS (VmRSS) at the end.
+Standard library only; figures in the README come from this script.
+"""
+import argparse, base64, json, os, signal, socket, struct, threading, time
+from urllib.parse import urlparse
+
+OBS = {"eye": [3.0, 1.5, 3.0], "dir": [1.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0],
+       "velocity": [0.0, 0.0, 0.0], "half_fov_x": 0.6, "half_fov_y": 0.45,
+       "max_speed": 1.5, "max_turn": 1.0}
+WIDE = {"depth_frames": 10000, "frame_time_s": 0.05, "range_cull": "any",
+        "lookahead_cull": "any", "granularity": "cell", "size_threshold_px": 0.0,
+        "screen": [640, 480], "read_bytes": 1 << 30, "cache_bytes": 1 << 30,
+        "impostors": False}
+
+
+def rss_mb(pid):
+    try:
+        for line in open(f"/proc/{pid}/status"):
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return float("nan")
+
+
+class Health(threading.Thread):
+    def __init__(self, host, port):
+        super().__init__(daemon=True)
+        self.host, self.port, self.stop, self.ms = host, port, False, []
+
+    def run(self):
+        while not self.stop:
+            t0 = time.monotonic()
+            try:
+                s = socket.create_connection((self.host, self.port), timeout=5)
+                s.settimeout(5)
+                s.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+                ok = s.recv(12).startswith(b"HTTP/1.1 200")
+                s.close()
+            except OSError:
+                ok = False
+            self.ms.append((time.monotonic() - t0) * 1e3 if ok else 5000.0)
+            time.sleep(0.02)
+
+    def summary(self):
+        v = sorted(self.ms) or [float("nan")]
+        return v[len(v) // 2], v[min(len(v) - 1, int(len(v) * 0.99))], v[-1], len(v)
+
+
+def ws_connect(host, port, rcvbuf=None):
+    s = socket.socket()
+    if rcvbuf:
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf)
+    s.settimeout(10)
+    s.connect((host, port))
+    key = base64.b64encode(os.urandom(16)).decode()
+    s.sendall((f"GET /v1/stream HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\n"
+               f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+               "Sec-WebSocket-Version: 13\r\n\r\n").encode())
+    head = b""
+    while b"\r\n\r\n" not in head:
+        chunk = s.recv(1)
+        if not chunk:
+            raise OSError("closed during the handshake")
+        head += chunk
+    if not head.startswith(b"HTTP/1.1 101"):
+        raise OSError(head.split(b"\r\n")[0].decode())
+    return s
+
+
+def ws_text(payload):
+    data = payload.encode()
+    mask = os.urandom(4)
+    n = len(data)
+    head = bytes([0x81]) + (bytes([0x80 | n]) if n < 126 else bytes([0x80 | 126]) + struct.pack(">H", n))
+    return head + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(data))
+
+
+def hello():
+    return json.dumps({"Hello": {"version": 2, "policy": WIDE, "rate_bytes_per_s": 1 << 40}})
+
+
+def flood(host, port, seconds):
+    def one():
+        try:
+            s = ws_connect(host, port)
+            s.sendall(ws_text(hello()))
+            for i in range(2500):
+                o = dict(OBS, eye=[OBS["eye"][0] + (i % 50) * 0.01, OBS["eye"][1], OBS["eye"][2]])
+                s.sendall(ws_text(json.dumps({"Observer": o})))
+            s.close()
+        except OSError as e:
+            print("  flood client:", e)
+    ts = [threading.Thread(target=one) for _ in range(2)]
+    [t.start() for t in ts]
+    [t.join() for t in ts]
+    time.sleep(seconds)
+
+
+def never_read(host, port, seconds):
+    held = []
+    for _ in range(200):
+        try:
+            s = ws_connect(host, port, rcvbuf=4096)
+            s.sendall(ws_text(hello()))
+            s.sendall(ws_text(json.dumps({"Observer": OBS})))
+            held.append(s)
+        except OSError as e:
+            print("  never-read client:", e)
+            break
+    print(f"  {len(held)} sessions open, never read")
+    time.sleep(seconds)
+    return held
+
+
+def slow_headers(host, port, seconds):
+    held = []
+    for _ in range(300):
+        try:
+            s = socket.create_connection((host, port), timeout=5)
+            s.sendall(b"GET /healthz HTTP/1.1\r\nHost: x\r\n")
+            held.append(s)
+        except OSError as e:
+            print("  slow socket:", e)
+            break
+    time.sleep(seconds)
+    return held
+
+
+def held(host, port, seconds):
+    body = json.dumps({"version": 2, "observer": OBS,
+                       "policy": dict(WIDE, depth_frames=16, range_cull="direction",
+                                      granularity="object", read_bytes=4 << 20),
+                       "held": [0] + [1] * 399_999}, separators=(",", ":")).encode()
+    req = (f"POST /v1/prefetch HTTP/1.1\r\nHost: x\r\nContent-Type: application/json\r\n"
+           f"Content-Length: {len(body)}\r\nConnection: close\r\n\r\n").encode() + body
+    end = time.monotonic() + seconds
+    sizes = []
+
+    def loop():
+        while time.monotonic() < end:
+            try:
+                s = socket.create_connection((host, port), timeout=30)
+                s.sendall(req)
+                got = b""
+                while True:
+                    c = s.recv(1 << 16)
+                    if not c:
+                        break
+                    got += c
+                sizes.append((got[9:12].decode(errors="replace"), len(got)))
+                s.close()
+            except OSError:
+                sizes.append(("err", 0))
+    ts = [threading.Thread(target=loop) for _ in range(4)]
+    [t.start() for t in ts]
+    [t.join() for t in ts]
+    statuses = sorted({st for st, _ in sizes})
+    print(f"  {len(sizes)} requests, statuses {statuses}, largest answer {max(n for _, n in sizes)} bytes")
+
+
+def reload(host, port, seconds, pid, batch):
+    s = socket.socket()
+    s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    s.connect((host, port))
+    s.sendall(f"GET /v1/batch?ids={batch} HTTP/1.1\r\nHost: x\r\n\r\n".encode())
+    time.sleep(0.5)
+    os.kill(pid, signal.SIGHUP)
+    time.sleep(seconds)
+    return s
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--server", default="http://127.0.0.1:7878")
+    ap.add_argument("--pid", type=int, required=True)
+    ap.add_argument("--attack", default="all")
+    ap.add_argument("--seconds", type=float, default=5.0)
+    ap.add_argument("--batch", default=",".join(["1"] * 1000),
+                    help="ids of the slow reader's batch (reload)")
+    ap.add_argument("--eye", default="3,1.5,3", help="an eye inside a room: x,y,z")
+    a = ap.parse_args()
+    OBS["eye"] = [float(x) for x in a.eye.split(",")]
+    u = urlparse(a.server)
+    host, port = u.hostname, u.port
+    names = ["flood", "never-read", "slow-headers", "held", "reload"] if a.attack == "all" else a.attack.split(",")
+    for name in names:
+        h = Health(host, port)
+        h.start()
+        keep = None
+        if name == "flood":
+            flood(host, port, a.seconds)
+        elif name == "never-read":
+            keep = never_read(host, port, a.seconds)
+        elif name == "slow-headers":
+            keep = slow_headers(host, port, a.seconds)
+        elif name == "held":
+            held(host, port, a.seconds)
+        elif name == "reload":
+            keep = reload(host, port, a.seconds, a.pid, a.batch)
+        h.stop = True
+        h.join()
+        p50, p99, mx, n = h.summary()
+        print(f"{name}: /healthz p50 {p50:.1f} ms, p99 {p99:.1f} ms, max {mx:.1f} ms over {n} checks; "
+              f"server RSS {rss_mb(a.pid):.0f} MB")
+        if keep:
+            for s in keep if isinstance(keep, list) else [keep]:
+                s.close()
+        time.sleep(1.0)
+
+
+if __name__ == "__main__":
+    main()
