@@ -89,9 +89,12 @@ pub enum Algorithm {
     #[default]
     Optimize,
     /// Maciel's cluster traversal: far clusters as boxes, the rest as objects with their finest
-    /// resident LOD that fits ([`crate::cluster`]; the walk and bench drive it). As an object
+    /// resident LOD that fits ([`crate::cluster`]; the frame decision drives it). As an object
     /// elider on its own it is [`Algorithm::Optimize`].
     Impostors,
+    /// Every object at its coarsest resident LOD: the cheapest image, a baseline for the
+    /// benchmark.
+    Coarsest,
 }
 
 impl Algorithm {
@@ -111,6 +114,7 @@ impl Algorithm {
             Algorithm::Feedback => "feedback",
             Algorithm::Optimize => "optimize",
             Algorithm::Impostors => "impostors",
+            Algorithm::Coarsest => "coarsest",
         }
     }
 }
@@ -123,13 +127,16 @@ impl fmt::Display for Algorithm {
 
 /// An unknown algorithm name was given to [`Algorithm::from_str`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown detail elision algorithm `{0}` (expected none, static, feedback or optimize)")]
+#[error(
+    "unknown detail elision algorithm `{0}` (expected none, static, feedback, optimize, impostors or coarsest)"
+)]
 pub struct ParseAlgorithmError(pub String);
 
 impl FromStr for Algorithm {
     type Err = ParseAlgorithmError;
 
-    /// Parses `none`, `static`, `feedback` or `optimize` (case-insensitive; `optimise` too).
+    /// Parses `none`, `static`, `feedback`, `optimize`, `impostors` or `coarsest`
+    /// (case-insensitive; `optimise` too).
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s.trim().to_ascii_lowercase().as_str() {
             "none" => Ok(Algorithm::None),
@@ -137,6 +144,7 @@ impl FromStr for Algorithm {
             "feedback" => Ok(Algorithm::Feedback),
             "optimize" | "optimise" => Ok(Algorithm::Optimize),
             "impostors" => Ok(Algorithm::Impostors),
+            "coarsest" => Ok(Algorithm::Coarsest),
             _ => Err(ParseAlgorithmError(s.to_owned())),
         }
     }
@@ -399,6 +407,7 @@ impl Elider {
     ) -> Frame {
         let choices = match self.algorithm {
             Algorithm::None => by_rule(cands, |c| (!c.lods.is_empty()).then_some(0)),
+            Algorithm::Coarsest => by_rule(cands, |c| c.lods.len().checked_sub(1)),
             Algorithm::Static => {
                 let t = self.params.static_px_per_tri;
                 by_rule(cands, |c| static_lod(&c.lods, c.pixels, t))

@@ -5,6 +5,7 @@ pub mod cache;
 pub mod cluster;
 pub mod cost;
 pub mod elision;
+pub mod frame;
 pub mod impostor;
 pub mod io;
 pub mod loadtest;

@@ -93,9 +93,75 @@ pub fn screen_pixels(b: &Aabb, view_proj: &Mat4, width: u32, height: u32) -> f32
     size.x * width as f32 * size.y * height as f32
 }
 
-/// Where the frame is seen from, as the candidates need it.
+/// Near plane distance of every view (metres): also the margin by which an eye counts as
+/// inside a cluster's box.
+pub const NEAR: f32 = 0.05;
+
+/// A perspective viewpoint.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    /// Eye position (world).
+    pub eye: Vec3,
+    /// Point looked at (world).
+    pub target: Vec3,
+    /// Up direction (world).
+    pub up: Vec3,
+    /// Vertical field of view in radians, in `(0, π)`.
+    pub fovy: f32,
+    /// Near plane distance, `> 0`.
+    pub near: f32,
+    /// Far plane distance, `> near`.
+    pub far: f32,
+}
+
+impl Camera {
+    /// World-to-clip matrix: right-handed view, WebGPU clip space (depth 0..1, y up).
+    pub fn view_proj(&self, aspect: f32) -> Mat4 {
+        let proj =
+            glam::camera::rh::proj::directx::perspective(self.fovy, aspect, self.near, self.far);
+        proj * glam::camera::rh::view::look_at_mat4(self.eye, self.target, self.up)
+    }
+}
+
+/// The far plane for a model with these bounds: beyond the whole model from anywhere in it.
+pub fn far_plane(bounds: &Aabb) -> f32 {
+    bounds.size().length().max(10.0) * 1.5
+}
+
+/// Horizontal half field of view (radians) of a view `fovy` high (radians) at this aspect.
+pub fn half_fov_x(fovy: f32, aspect: f32) -> f32 {
+    ((fovy * 0.5).tan() * aspect).atan()
+}
+
+/// The observer a client at `eye` looking along `dir` and moving at `velocity` announces to the
+/// server, with its field of view (`fovy` high at `aspect`) and its speed limits.
+pub fn observer(
+    eye: Vec3,
+    dir: Vec3,
+    velocity: Vec3,
+    fovy: f32,
+    aspect: f32,
+    max_speed: f32,
+    max_turn: f32,
+) -> portico_protocol::Observer {
+    portico_protocol::Observer {
+        eye: eye.into(),
+        dir: dir.into(),
+        up: [0.0, 1.0, 0.0],
+        velocity: velocity.into(),
+        half_fov_x: half_fov_x(fovy, aspect),
+        half_fov_y: fovy * 0.5,
+        max_speed,
+        max_turn,
+    }
+}
+
+/// Where the frame is seen from: everything the frame decision and the renderer need of the
+/// observer, worked out once per frame.
 #[derive(Debug, Clone, Copy)]
 pub struct Viewpoint {
+    /// The camera (eye, target, field of view, near and far planes).
+    pub camera: Camera,
     /// World-to-clip matrix.
     pub view_proj: Mat4,
     /// Eye position.
@@ -106,6 +172,55 @@ pub struct Viewpoint {
     pub size: (u32, u32),
     /// Horizontal half field of view (radians), for the focus term.
     pub half_fov: f32,
+    /// Vertical half field of view (radians).
+    pub half_fov_y: f32,
+}
+
+impl Viewpoint {
+    /// The view from `eye` along `dir`, `fovy` high (radians), onto an image of `size`, with
+    /// its far plane at `far`.
+    pub fn new(eye: Vec3, dir: Vec3, fovy: f32, size: (u32, u32), far: f32) -> Viewpoint {
+        let aspect = size.0 as f32 / size.1.max(1) as f32;
+        let camera = Camera {
+            eye,
+            target: eye + dir,
+            up: Vec3::Y,
+            fovy,
+            near: NEAR,
+            far,
+        };
+        Viewpoint {
+            view_proj: camera.view_proj(aspect),
+            camera,
+            eye,
+            dir,
+            size,
+            half_fov: half_fov_x(fovy, aspect),
+            half_fov_y: fovy * 0.5,
+        }
+    }
+
+    /// The view an observer announces, onto an image of `size`, far plane at `far`.
+    pub fn of(obs: &portico_protocol::Observer, size: (u32, u32), far: f32) -> Viewpoint {
+        Viewpoint::new(
+            obs.eye.into(),
+            obs.dir.into(),
+            obs.half_fov_y * 2.0,
+            size,
+            far,
+        )
+    }
+
+    /// The view frustum (side planes only: walls do the far culling).
+    pub fn frustum(&self) -> Frustum {
+        Frustum::new(self.eye, self.dir, Vec3::Y, self.half_fov, self.half_fov_y)
+    }
+
+    /// Whether the eye is inside `b` (within the near-plane margin): no box stands in for
+    /// what surrounds the eye.
+    pub fn inside(&self, b: &Aabb) -> bool {
+        (0..3).all(|i| b.min[i] - NEAR <= self.eye[i] && self.eye[i] <= b.max[i] + NEAR)
+    }
 }
 
 /// Elision candidates for the visible objects; `resident(segment)` says what the cache holds.
@@ -167,7 +282,7 @@ mod tests {
 
     #[test]
     fn nearer_boxes_cover_more_pixels_and_behind_covers_the_screen() {
-        let cam = crate::render::Camera {
+        let cam = Camera {
             eye: Vec3::ZERO,
             target: Vec3::NEG_Z,
             up: Vec3::Y,

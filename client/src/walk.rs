@@ -6,18 +6,18 @@
 //! loop never waits for the network: what has not arrived is skipped and counted (§5.2.4).
 
 use crate::cache::ObjectCache;
-use crate::cluster::{self, Cut, Stand, Traversal};
+use crate::cluster::Stand;
 use crate::cost::{CostModel, OnlineCost};
-use crate::elision::{Algorithm, Elider};
+use crate::elision::Algorithm;
+use crate::frame::{Decider, Scene};
 use crate::io::{Catalogue, IoConfig, IoStage, Payload};
 use crate::net::Remote;
-use crate::render::{Camera, Draw, GpuImpostor, GpuMesh, Renderer};
+use crate::render::{Draw, GpuImpostor, GpuMesh, Renderer};
 use crate::schedule::{Ask, Event};
 use crate::stats::{FrameRow, Series, write_csv};
-use crate::view;
+use crate::view::{self, Viewpoint};
 use anyhow::{Context, Result};
 use glam::{Mat4, Vec3};
-use portico_data::cells::realtime::Frustum;
 use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::Header;
 use portico_data::geometry::{Mesh, Vertex, encode_geometry};
@@ -381,11 +381,10 @@ struct Walker<'a> {
     cfg: &'a WalkConfig,
     model: Model,
     cache: ObjectCache<Resident>,
-    elider: Elider,
+    decider: Decider,
     cost: CostModel,
     online: OnlineCost,
     consumed: u64,
-    traversal: Traversal,
     colour_boxes: std::collections::HashMap<u32, GpuMesh>,
     /// Segments larger than the whole cache: reported as held so no answer lists them again.
     too_big: std::collections::HashSet<u32>,
@@ -403,11 +402,14 @@ impl<'a> Walker<'a> {
             cfg,
             model,
             cache: ObjectCache::new(cfg.cache_bytes),
-            elider: Elider::new(cfg.elision, cfg.budget_s),
+            decider: Decider::new(
+                cfg.elision,
+                cfg.budget_s,
+                Some(cfg.policy.size_threshold_px),
+            ),
             cost,
             online: OnlineCost::default(),
             consumed: 0,
-            traversal: Traversal::default(),
             colour_boxes: std::collections::HashMap::new(),
             too_big: std::collections::HashSet::new(),
             latencies: Vec::new(),
@@ -467,99 +469,56 @@ impl<'a> Walker<'a> {
     }
 
     fn observer(&self, eye: Vec3, dir: Vec3, velocity: Vec3) -> Observer {
-        let half_y = self.cfg.fovy * 0.5;
         let aspect = self.cfg.size.0 as f32 / self.cfg.size.1.max(1) as f32;
-        Observer {
-            eye: eye.into(),
-            dir: dir.into(),
-            up: [0.0, 1.0, 0.0],
-            velocity: velocity.into(),
-            half_fov_x: (half_y.tan() * aspect).atan(),
-            half_fov_y: half_y,
-            max_speed: self.cfg.max_speed,
-            max_turn: self.cfg.max_turn,
-        }
-    }
-
-    /// Visibility → elision → render for one frame.
-    fn frame(&mut self, r: &mut Renderer, obs: &Observer, row: &mut FrameRow) -> Result<()> {
-        let (eye, dir) = (Vec3::from(obs.eye), Vec3::from(obs.dir));
-        let t = Instant::now();
-        let frustum = Frustum::new(eye, dir, Vec3::Y, obs.half_fov_x, obs.half_fov_y);
-        let cache = &self.cache;
-        let stab_segments = self.model.header.cells.as_ref().map(|c| &c.stab_segments);
-        let stab = |cell: u32| match stab_segments
-            .and_then(|s| s.get(cell as usize))
-            .and_then(|&s| cache.get(s))
-        {
-            Some(Resident::Stab(l)) => Some(l.clone()),
-            _ => None,
-        };
-        let vis = view::visible(
-            self.model.graph.as_ref(),
-            &stab,
-            &self.model.bounds,
-            &frustum,
-        );
-        row.visibility_s = t.elapsed().as_secs_f64();
-        row.visible_cells = vis.cells;
-        row.visible_objects = vis.objects.len() as u32;
-        row.visibility_fallback = vis.fallback;
-
-        let t = Instant::now();
-        let camera = self.camera(eye, dir);
-        let vp = camera.view_proj(r.aspect());
-        let cache = &self.cache;
-        let resident = |s: u32| matches!(cache.get(s), Some(Resident::Mesh(_)));
-        let viewpoint = view::Viewpoint {
-            view_proj: vp,
+        view::observer(
             eye,
             dir,
-            size: self.cfg.size,
-            half_fov: obs.half_fov_x,
+            velocity,
+            self.cfg.fovy,
+            aspect,
+            self.cfg.max_speed,
+            self.cfg.max_turn,
+        )
+    }
+
+    /// The frame decision ([`crate::frame`]), then its draws on the GPU.
+    fn frame(&mut self, r: &mut Renderer, obs: &Observer, row: &mut FrameRow) -> Result<()> {
+        let view = Viewpoint::of(
+            obs,
+            self.cfg.size,
+            view::far_plane(&self.model.header.bounds),
+        );
+        let scene = Scene {
+            header: &self.model.header,
+            graph: self.model.graph.as_ref(),
+            bounds: &self.model.bounds,
         };
-        let mut cands = view::candidates(&self.model.header, &vis.objects, &viewpoint, &resident);
-        // Never want finer than the server's lookahead will ever send (§5.3's static cap).
-        let dropped = view::cap_detail(&mut cands, self.cfg.policy.size_threshold_px);
-        let model = self.online.apply(&self.cost);
-        let (lods, boxes) = match (&self.model.header.hierarchy, self.cfg.elision) {
-            (Some(h), Algorithm::Impostors) => {
-                let f = Sight {
-                    h,
-                    cache,
-                    camera: &camera,
-                    viewpoint: &viewpoint,
-                    size: self.cfg.size,
-                };
-                let cut = f.traverse(&mut self.traversal, &cands, &model, self.cfg.budget_s);
-                row.predicted_s = cut.predicted_s;
-                row.objects_skipped = cut.objects_skipped;
-                row.lods_skipped = lods_short(&cands, &cut.lods);
-                (cut.lods, cut.boxes)
-            }
-            _ => {
-                let decided = self.elider.choose(&cands, &model, self.last_frame_s);
-                row.predicted_s = decided.predicted_s;
-                row.lods_skipped = decided.lods_skipped;
-                row.objects_skipped = decided.objects_skipped;
-                (decided.choices.iter().map(|c| c.lod).collect(), Vec::new())
-            }
-        };
-        row.elision_s = t.elapsed().as_secs_f64();
+        let cost = self.online.apply(&self.cost);
+        let d = self.decider.decide(
+            &scene,
+            &view,
+            &Cached(&self.cache, &scene),
+            &cost,
+            self.last_frame_s,
+        );
+        row.visibility_s = d.visibility_s;
+        row.visible_cells = d.visible.cells;
+        row.visible_objects = d.visible.objects.len() as u32;
+        row.visibility_fallback = d.visible.fallback;
+        row.elision_s = d.elision_s;
+        row.predicted_s = d.frame.predicted_s;
+        row.lods_skipped = d.frame.lods_skipped;
+        row.objects_skipped = d.frame.objects_skipped;
 
         if let Some(h) = &self.model.header.hierarchy {
-            make_colour_boxes(&mut self.colour_boxes, h, &boxes, r);
+            make_colour_boxes(&mut self.colour_boxes, h, &d.boxes, r);
         }
         let header = &self.model.header;
         let cache = &self.cache;
-        let mut draws = Vec::with_capacity(cands.len());
-        let mut touched = Vec::new();
-        for ((c, lod), skip) in cands.iter().zip(&lods).zip(&dropped) {
-            let inst = &header.instances[c.id as usize];
-            let all = header.lods_of(inst);
-            touched.extend(all.iter().map(|l| l.segment).filter(|&s| resident(s)));
-            let Some(l) = lod else { continue };
-            if let Some(Resident::Mesh(mesh)) = cache.get(all[l + skip].segment) {
+        let mut draws = Vec::with_capacity(d.drawn.len() + d.boxes.len());
+        for o in &d.drawn {
+            if let Some(Resident::Mesh(mesh)) = cache.get(o.segment) {
+                let inst = &header.instances[o.instance as usize];
                 let color = header
                     .materials
                     .get(inst.material as usize)
@@ -572,42 +531,19 @@ impl<'a> Walker<'a> {
             }
         }
         let textured = match &header.hierarchy {
-            Some(h) => stand_ins(
-                cache,
-                &self.colour_boxes,
-                h,
-                &boxes,
-                &mut draws,
-                &mut touched,
-            ),
+            Some(h) => stand_ins(cache, &self.colour_boxes, h, &d.boxes, &mut draws),
             None => Vec::new(),
         };
-        let timing = r.render_with_boxes(&camera, &draws, &textured)?;
+        let timing = r.render_with_boxes(&view.camera, &draws, &textured)?;
         row.render_s = timing.total_s;
         row.drawn_objects = timing.draws;
         row.drawn_triangles = timing.triangles;
-        // §5.2.3: what is needed now moves to the head of the cache.
-        let eye_stab = vis
-            .eye_cell
-            .and_then(|c| stab_segments.and_then(|s| s.get(c as usize)).copied());
-        for s in touched.into_iter().chain(eye_stab) {
+        for &s in &d.touched {
             self.cache.touch(s);
         }
         row.resident_segments = self.cache.len() as u32;
         row.resident_bytes = self.cache.bytes();
         Ok(())
-    }
-
-    fn camera(&self, eye: Vec3, dir: Vec3) -> Camera {
-        let far = self.model.header.bounds.size().length().max(10.0) * 1.5;
-        Camera {
-            eye,
-            target: eye + dir,
-            up: Vec3::Y,
-            fovy: self.cfg.fovy,
-            near: 0.05,
-            far,
-        }
     }
 
     fn publish(&self, io: &IoStage, observer: Observer) {
@@ -683,57 +619,19 @@ impl<'a> Walker<'a> {
     }
 }
 
-/// LOD levels an object drawn by the cluster traversal gave up because finer ones were not
-/// resident (Funkhouser §5.2.4's count, for the traversal's choices).
-fn lods_short(cands: &[crate::elision::Candidate], lods: &[Option<usize>]) -> u32 {
-    cands
-        .iter()
-        .zip(lods)
-        .filter_map(|(c, l)| {
-            let l = (*l)?;
-            Some(c.lods[..l].iter().filter(|o| !o.resident).count() as u32)
-        })
-        .sum()
-}
+/// What the walker's cache holds, as the frame decision asks it.
+struct Cached<'a>(&'a ObjectCache<Resident>, &'a Scene<'a>);
 
-/// What the cluster traversal looks at in one frame.
-struct Sight<'a> {
-    h: &'a Hierarchy,
-    cache: &'a ObjectCache<Resident>,
-    camera: &'a Camera,
-    viewpoint: &'a view::Viewpoint,
-    size: (u32, u32),
-}
+impl crate::frame::Resident for Cached<'_> {
+    fn has(&self, id: u32) -> bool {
+        self.0.contains(id)
+    }
 
-impl Sight<'_> {
-    /// Maciel's traversal over the clusters for this frame's candidates.
-    fn traverse(
-        &self,
-        t: &mut Traversal,
-        cands: &[crate::elision::Candidate],
-        model: &CostModel,
-        budget_s: f64,
-    ) -> Cut {
-        let (h, (w, ht)) = (self.h, self.size);
-        let vp = self.viewpoint.view_proj;
-        let pixels = |n: u32| view::screen_pixels(&h.nodes[n as usize].bounds, &vp, w, ht);
-        let (eye, near) = (self.camera.eye, self.camera.near);
-        let inside = |n: u32| {
-            let b = &h.nodes[n as usize].bounds;
-            (0..3).all(|i| b.min[i] - near <= eye[i] && eye[i] <= b.max[i] + near)
-        };
-        let textured = |n: u32| {
-            let s = h.nodes[n as usize].texture;
-            s != u32::MAX && matches!(self.cache.get(s), Some(Resident::Impostor(_)))
-        };
-        let f = cluster::Frame {
-            pixels: &pixels,
-            eye_inside: &inside,
-            textured: &textured,
-            cost: model,
-            budget_s,
-        };
-        t.choose(h, cands, &f)
+    fn stab(&self, cell: u32) -> Option<Arc<StabList>> {
+        match self.0.get(self.1.stab_segment(cell)?) {
+            Some(Resident::Stab(l)) => Some(l.clone()),
+            _ => None,
+        }
     }
 }
 
@@ -766,16 +664,12 @@ fn stand_ins<'c>(
     h: &Hierarchy,
     boxes: &[(u32, Stand)],
     draws: &mut Vec<Draw<'c>>,
-    touched: &mut Vec<u32>,
 ) -> Vec<&'c GpuImpostor> {
     let mut textured = Vec::new();
     for &(n, stand) in boxes {
         let t = h.nodes[n as usize].texture;
         match (stand, cache.get(t)) {
-            (Stand::Textured, Some(Resident::Impostor(i))) => {
-                touched.push(t);
-                textured.push(i);
-            }
+            (Stand::Textured, Some(Resident::Impostor(i))) => textured.push(i),
             _ => {
                 if let Some(mesh) = colour.get(&n) {
                     draws.push(Draw {

@@ -52,20 +52,20 @@ pub mod plot;
 pub mod report;
 pub mod scene;
 
-use crate::cluster::{self, Stand, Traversal};
+use crate::cluster::Stand;
 use crate::cost::{CostModel, OnlineCost};
-use crate::elision::{Algorithm, Elider};
+use crate::elision::Algorithm;
+use crate::frame::Decider;
 use crate::render::GpuImpostor;
-use crate::render::{Camera, Draw, Renderer};
+use crate::render::{Draw, Renderer};
 use crate::stats::Series;
-use crate::view;
+use crate::view::{self, NEAR};
 use anyhow::{Context, Result, bail, ensure};
 use critical::{CriticalCounts, CriticalParams};
 use depth::DepthBuffer;
 use fidelity::{FidelityAccumulator, RefPoint};
-use glam::{Mat4, Vec3};
+use glam::Mat4;
 use image::RgbaImage;
-use portico_data::cells::realtime::Frustum;
 use portico_data::path::CameraPath;
 use scene::Scene;
 use serde::Serialize;
@@ -73,9 +73,6 @@ use std::fmt;
 use std::path::PathBuf;
 use std::str::FromStr;
 use std::time::Instant;
-
-/// Near plane of every benchmark camera (the walk client's).
-const NEAR: f32 = 0.05;
 
 /// One run of the benchmark: what decides the LODs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -472,26 +469,53 @@ pub fn run(cfg: &BenchConfig, progress: &mut dyn FnMut(u64, u64)) -> Result<Benc
 
 /// A run's choice for one frame: `(instance, lod)` pairs to draw, clusters drawn as boxes, and
 /// the predicted render time.
-type Chosen = (Vec<(u32, usize)>, Vec<(u32, Stand)>, f64);
-
 /// Where frame `i` is seen from.
 struct FrameView {
     frame: u64,
     t: f64,
-    frustum: Frustum,
-    camera: Camera,
-    viewpoint: view::Viewpoint,
+    view: view::Viewpoint,
 }
 
 /// One run's state across frames.
 struct Run {
     kind: RunKind,
-    elider: Option<Elider>,
-    traversal: Traversal,
+    decider: Decider,
     online: OnlineCost,
     last_frame_s: Option<f64>,
     fidelity: FidelityAccumulator,
     rows: Vec<FrameRecord>,
+}
+
+impl RunKind {
+    /// The frame decision's algorithm for this run: Regular is every object at its finest LOD
+    /// with everything resident (`none`), the reference the others are scored against.
+    fn algorithm(self) -> Algorithm {
+        match self {
+            RunKind::Regular => Algorithm::None,
+            RunKind::Coarsest => Algorithm::Coarsest,
+            RunKind::Impostors => Algorithm::Impostors,
+            RunKind::Elision(a) => a,
+        }
+    }
+
+    /// Whether the run's choice depends on the frame budget (and learns from its frame times).
+    fn budgeted(self) -> bool {
+        matches!(self, RunKind::Elision(_) | RunKind::Impostors)
+    }
+}
+
+/// Everything in the benchmark is resident: its runs differ in what they choose, not in what
+/// they have.
+struct Everything<'a>(&'a Scene);
+
+impl crate::frame::Resident for Everything<'_> {
+    fn has(&self, _: u32) -> bool {
+        true
+    }
+
+    fn stab(&self, cell: u32) -> Option<std::sync::Arc<portico_data::cells::StabList>> {
+        self.0.stabs.get(cell as usize).cloned().flatten()
+    }
 }
 
 /// The benchmark in progress.
@@ -510,11 +534,7 @@ impl<'a> Bench<'a> {
             .into_iter()
             .map(|kind| Run {
                 kind,
-                elider: match kind {
-                    RunKind::Elision(a) => Some(Elider::new(a, cfg.budget_s)),
-                    _ => None,
-                },
-                traversal: Traversal::default(),
+                decider: Decider::new(kind.algorithm(), cfg.budget_s, None),
                 online: OnlineCost::default(),
                 last_frame_s: None,
                 fidelity: FidelityAccumulator::new(cfg.patch_px),
@@ -559,57 +579,31 @@ impl<'a> Bench<'a> {
     /// do not land in frame 0 of the first run.
     fn warm_up(&mut self, r: &mut Renderer) -> Result<()> {
         let view = self.view_at(0);
-        let vis = self.visible(&view);
-        let drawn: Vec<(u32, usize)> = vis.objects.iter().map(|&o| (o, 0)).collect();
+        let d = Decider::new(Algorithm::None, self.cfg.budget_s, None).decide(
+            &self.scene.frame_scene(),
+            &view.view,
+            &Everything(self.scene),
+            &self.cost,
+            None,
+        );
+        let drawn: Vec<(u32, usize)> = d.drawn.iter().map(|o| (o.instance, o.lod)).collect();
         let draws = self.draws(&drawn);
-        r.render(&view.camera, &draws)?;
+        r.render(&view.view.camera, &draws)?;
         Ok(())
     }
 
     fn view_at(&self, frame: u64) -> FrameView {
         let t = frame as f64 * self.cfg.dt_s;
         let (eye, dir) = self.cfg.path.sample(t as f32);
-        let (w, h) = self.cfg.size;
-        let aspect = w as f32 / h as f32;
-        let half_y = self.cfg.fovy * 0.5;
-        let half_x = (half_y.tan() * aspect).atan();
-        let camera = Camera {
-            eye,
-            target: eye + dir,
-            up: Vec3::Y,
-            fovy: self.cfg.fovy,
-            near: NEAR,
-            far: self.scene.far(),
-        };
         FrameView {
             frame,
             t,
-            frustum: Frustum::new(eye, dir, Vec3::Y, half_x, half_y),
-            viewpoint: view::Viewpoint {
-                view_proj: camera.view_proj(aspect),
-                eye,
-                dir,
-                size: self.cfg.size,
-                half_fov: half_x,
-            },
-            camera,
+            view: view::Viewpoint::new(eye, dir, self.cfg.fovy, self.cfg.size, self.scene.far()),
         }
     }
 
-    /// Eye-to-object visibility with the resident stab lists (Funkhouser §4.1.2).
-    fn visible(&self, v: &FrameView) -> view::Visible {
-        let stabs = &self.scene.stabs;
-        let stab = |c: u32| stabs.get(c as usize).cloned().flatten();
-        view::visible(
-            self.scene.graph.as_ref(),
-            &stab,
-            &self.scene.bounds,
-            &v.frustum,
-        )
-    }
-
-    /// Visibility, LOD choice and render of run `k`'s frame; returns its record and the drawn
-    /// `(instance, lod)` pairs sorted by instance.
+    /// The frame decision ([`crate::frame`]) and render of run `k`'s frame; returns its record
+    /// and the drawn `(instance, lod)` pairs sorted by instance.
     fn draw(
         &mut self,
         r: &mut Renderer,
@@ -617,95 +611,40 @@ impl<'a> Bench<'a> {
         v: &FrameView,
     ) -> Result<(FrameRecord, Vec<(u32, usize)>)> {
         let t0 = Instant::now();
-        let vis = self.visible(v);
-        let visibility_s = t0.elapsed().as_secs_f64();
-        let t1 = Instant::now();
-        let (drawn, boxes, predicted_s) = self.choose(k, &vis.objects, v);
-        let elision_s = t1.elapsed().as_secs_f64();
+        let run = &mut self.runs[k];
+        let cost = run.online.apply(&self.cost);
+        let d = run.decider.decide(
+            &self.scene.frame_scene(),
+            &v.view,
+            &Everything(self.scene),
+            &cost,
+            run.last_frame_s,
+        );
+        let mut drawn: Vec<(u32, usize)> = d.drawn.iter().map(|o| (o.instance, o.lod)).collect();
+        drawn.sort_unstable();
         let mut draws = self.draws(&drawn);
-        let textured = self.boxes(&boxes, &mut draws);
-        let timing = r.render_with_boxes(&v.camera, &draws, &textured)?;
+        let textured = self.boxes(&d.boxes, &mut draws);
+        let timing = r.render_with_boxes(&v.view.camera, &draws, &textured)?;
         let frame_s = t0.elapsed().as_secs_f64();
         let run = &mut self.runs[k];
         run.last_frame_s = Some(frame_s);
-        if run.elider.is_some() || run.kind == RunKind::Impostors {
-            run.online.observe(predicted_s, timing.total_s);
+        if run.kind.budgeted() {
+            run.online.observe(d.frame.predicted_s, timing.total_s);
         }
         let row = FrameRecord {
             frame: v.frame,
             t: v.t,
             frame_s,
-            visibility_s,
-            elision_s,
+            visibility_s: d.visibility_s,
+            elision_s: d.elision_s,
             render_s: timing.total_s,
-            predicted_s,
-            visible_objects: vis.objects.len() as u32,
+            predicted_s: d.frame.predicted_s,
+            visible_objects: d.visible.objects.len() as u32,
             drawn_objects: timing.draws,
             triangles: timing.triangles,
             ..FrameRecord::default()
         };
         Ok((row, drawn))
-    }
-
-    /// The `(instance, lod)` pairs run `k` draws for `objects`, the clusters it draws as boxes,
-    /// and the predicted render time.
-    fn choose(&mut self, k: usize, objects: &[u32], v: &FrameView) -> Chosen {
-        let scene = self.scene;
-        let with_lods = objects.iter().copied().filter(|&o| scene.lod_count(o) > 0);
-        let run = &mut self.runs[k];
-        match run.kind {
-            RunKind::Regular => (with_lods.map(|o| (o, 0)).collect(), Vec::new(), 0.0),
-            RunKind::Coarsest => (
-                with_lods.map(|o| (o, scene.lod_count(o) - 1)).collect(),
-                Vec::new(),
-                0.0,
-            ),
-            RunKind::Impostors => {
-                let cands = view::candidates(&scene.header, objects, &v.viewpoint, &|_| true);
-                let model = run.online.apply(&self.cost);
-                let Some(h) = &scene.header.hierarchy else {
-                    let all = cands.iter().map(|c| (c.id, 0)).collect();
-                    return (all, Vec::new(), 0.0);
-                };
-                let (w, hgt) = self.cfg.size;
-                let pixels = |n: u32| {
-                    view::screen_pixels(&h.nodes[n as usize].bounds, &v.viewpoint.view_proj, w, hgt)
-                };
-                let eye = v.camera.eye;
-                let inside = |n: u32| contains(&h.nodes[n as usize].bounds, eye, NEAR);
-                let textured = |n: u32| scene.textured.contains_key(&n);
-                let f = cluster::Frame {
-                    pixels: &pixels,
-                    eye_inside: &inside,
-                    textured: &textured,
-                    cost: &model,
-                    budget_s: self.cfg.budget_s,
-                };
-                let cut = run.traversal.choose(h, &cands, &f);
-                let mut drawn: Vec<(u32, usize)> = cands
-                    .iter()
-                    .zip(&cut.lods)
-                    .filter_map(|(c, l)| l.map(|l| (c.id, l)))
-                    .collect();
-                drawn.sort_unstable();
-                (drawn, cut.boxes, cut.predicted_s)
-            }
-            RunKind::Elision(_) => {
-                let cands = view::candidates(&scene.header, objects, &v.viewpoint, &|_| true);
-                let model = run.online.apply(&self.cost);
-                let Some(elider) = run.elider.as_mut() else {
-                    return (Vec::new(), Vec::new(), 0.0);
-                };
-                let frame = elider.choose(&cands, &model, run.last_frame_s);
-                let mut drawn: Vec<(u32, usize)> = cands
-                    .iter()
-                    .zip(&frame.choices)
-                    .filter_map(|(c, ch)| ch.lod.map(|l| (c.id, l)))
-                    .collect();
-                drawn.sort_unstable();
-                (drawn, Vec::new(), frame.predicted_s)
-            }
-        }
     }
 
     /// Adds the average-colour boxes to `draws`; returns the textured boxes.
@@ -752,7 +691,7 @@ impl<'a> Bench<'a> {
         img: &RgbaImage,
     ) -> Vec<RefPoint> {
         let scene = self.scene;
-        let vp = v.viewpoint.view_proj;
+        let vp = v.view.view_proj;
         self.depth.clear();
         let finest = |o: u32| scene.finest_segment(o);
         for &(o, _) in drawn {
@@ -942,9 +881,6 @@ fn machine() -> Machine {
 }
 
 /// Whether `p` lies inside `b` grown by `margin` (a box around the eye cannot stand in).
-fn contains(b: &portico_data::geometry::Aabb, p: Vec3, margin: f32) -> bool {
-    (0..3).all(|i| b.min[i] - margin <= p[i] && p[i] <= b.max[i] + margin)
-}
 
 #[cfg(test)]
 mod tests {

@@ -188,7 +188,16 @@ impl Scene {
 
     /// The far plane distance for cameras in this model (as the walk client uses).
     pub fn far(&self) -> f32 {
-        self.header.bounds.size().length().max(10.0) * 1.5
+        crate::view::far_plane(&self.header.bounds)
+    }
+
+    /// The model as the frame decision sees it.
+    pub fn frame_scene(&self) -> crate::frame::Scene<'_> {
+        crate::frame::Scene {
+            header: &self.header,
+            graph: self.graph.as_ref(),
+            bounds: &self.bounds,
+        }
     }
 }
 

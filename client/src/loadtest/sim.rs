@@ -17,12 +17,12 @@
 use super::link::Pipe;
 use super::world::World;
 use crate::cache::ObjectCache;
-use crate::cluster::{self, Stand, Traversal};
 use crate::cost::CostModel;
-use crate::elision::{Algorithm, Candidate, Choice, Elider};
+use crate::elision::{Algorithm, Candidate, Choice};
+use crate::frame::{Decider, Decision, Resident};
 use crate::net::Remote;
 use crate::schedule::{Ask, Event, Fetcher, Items, drive};
-use crate::view;
+use portico_data::cells::StabList;
 use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse};
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
@@ -185,9 +185,9 @@ struct Client {
     cache: ObjectCache<()>,
     /// Resident segments: (bytes, drawn at least once).
     entries: HashMap<u32, (u64, bool)>,
-    elider: Elider,
-    /// Maciel's cluster traversal, when the policy asks for impostors and the model has them.
-    traversal: Option<Traversal>,
+    /// The frame decision (Maciel's traversal when the policy asks for impostors and the model
+    /// has them, else the optimizing elider).
+    decider: Decider,
     cost: CostModel,
     consumed: u64,
     last_answer: Option<AnswerStat>,
@@ -203,13 +203,16 @@ impl Client {
             rx,
             cache: ObjectCache::new(s.cache_bytes),
             entries: HashMap::new(),
-            elider: Elider::new(Algorithm::Optimize, s.world.dt),
-            traversal: match s.mode {
-                Mode::Prefetch(p) if p.impostors && s.world.header.hierarchy.is_some() => {
-                    Some(Traversal::default())
-                }
-                _ => None,
-            },
+            decider: Decider::new(
+                match s.mode {
+                    Mode::Prefetch(p) if p.impostors && s.world.header.hierarchy.is_some() => {
+                        Algorithm::Impostors
+                    }
+                    _ => Algorithm::Optimize,
+                },
+                s.world.dt,
+                Some(s.world.size_threshold_px),
+            ),
             cost: CostModel::default(),
             consumed: 0,
             last_answer: None,
@@ -274,60 +277,36 @@ impl Client {
     /// for path frame `p`.
     fn frame(&mut self, p: usize) -> (FrameStat, Decided) {
         let w = self.world.clone();
-        let cache = &self.cache;
-        let stab = |c: u32| {
-            w.stab_segment(c)
-                .filter(|&s| cache.contains(s))
-                .and_then(|_| w.stabs.get(&c).cloned())
-        };
-        let vis = view::visible(w.graph.as_ref(), &stab, &w.bounds, &w.frustum(p));
-        let resident = |s: u32| cache.contains(s);
-        let mut cands =
-            view::candidates(&w.header, &vis.objects, &w.frames[p].viewpoint, &resident);
-        let dropped = view::cap_detail(&mut cands, w.size_threshold_px);
-        let (decided, boxes) = match (&mut self.traversal, &w.header.hierarchy) {
-            (Some(t), Some(h)) => impostor_choice(t, h, &w, p, &cands, &self.cost, cache),
-            _ => (self.elider.choose(&cands, &self.cost, None), Vec::new()),
-        };
+        let scene = w.scene();
+        let d = self.decider.decide(
+            &scene,
+            &w.frames[p].viewpoint,
+            &Held(&self.cache, &w),
+            &self.cost,
+            None,
+        );
         let mut row = FrameStat {
             path_frame: p,
-            lods_skipped: decided.lods_skipped,
-            objects_skipped: decided.objects_skipped,
-            visible_objects: vis.objects.len() as u32,
+            lods_skipped: d.frame.lods_skipped,
+            objects_skipped: d.frame.objects_skipped,
+            visible_objects: d.visible.objects.len() as u32,
             lookahead_bytes: self.last_answer.map_or(0, |a| a.lookahead_bytes),
-            fallback: vis.fallback,
-            outside: vis.eye_cell.is_none(),
+            fallback: d.visible.fallback,
+            outside: d.visible.eye_cell.is_none(),
             ..FrameStat::default()
         };
-        let d = Decided {
-            segments: cands
-                .iter()
-                .zip(&dropped)
-                .map(|(c, &skip)| {
-                    let lods = w.header.lods_of(&w.header.instances[c.id as usize]);
-                    lods[skip..].iter().map(|l| l.segment).collect()
-                })
-                .collect(),
-            cands,
-            choices: decided.choices,
-            eye_stab: vis.eye_cell.and_then(|c| w.stab_segment(c)),
-        };
-        let mut used = Vec::new();
-        let mut touched = Vec::new();
-        for (i, (c, ch)) in d.cands.iter().zip(&d.choices).enumerate() {
+        for (c, ch) in d.candidates.iter().zip(&d.frame.choices) {
             count(&mut row, c, ch);
-            used.extend(ch.lod.map(|l| d.segments[i][l]));
-            let all = w.header.lods_of(&w.header.instances[c.id as usize]);
-            touched.extend(all.iter().map(|l| l.segment).filter(|&s| resident(s)));
         }
-        if !vis.fallback {
+        // What was drawn (the eye's stab list too, when it was used) counts as used.
+        let mut used: Vec<u32> = d.drawn.iter().map(|o| o.segment).collect();
+        if !d.visible.fallback {
             used.extend(d.eye_stab);
         }
-        // Textured boxes drawn are used and needed now, like geometry.
-        used.extend(&boxes);
-        touched.extend(&boxes);
-        // §5.2.3: what is needed now moves to the head of the cache.
-        for s in touched.into_iter().chain(d.eye_stab) {
+        if let Some(h) = &w.header.hierarchy {
+            used.extend(d.box_textures(h));
+        }
+        for &s in &d.touched {
             self.cache.touch(s);
         }
         for s in used {
@@ -335,7 +314,16 @@ impl Client {
                 e.1 = true;
             }
         }
-        (row, d)
+        let segments = (0..d.candidates.len())
+            .map(|i| d.segments(&scene, i))
+            .collect();
+        (
+            row,
+            Decided {
+                decision: d,
+                segments,
+            },
+        )
     }
 
     /// What the IO task gets after frame `f` (path frame `p`).
@@ -363,7 +351,13 @@ impl Client {
     fn missing_now(&self, d: &Decided) -> Vec<u32> {
         let mut stand_ins = Vec::new();
         let mut wanted = Vec::new();
-        for (i, (c, ch)) in d.cands.iter().zip(&d.choices).enumerate() {
+        let decision = &d.decision;
+        for (i, (c, ch)) in decision
+            .candidates
+            .iter()
+            .zip(&decision.frame.choices)
+            .enumerate()
+        {
             let Some(want) = ch.desired else { continue };
             let segs = &d.segments[i];
             if ch.lod.is_none()
@@ -378,7 +372,7 @@ impl Client {
         }
         stand_ins.sort_by(|a, b| b.0.total_cmp(&a.0));
         wanted.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let stab = d.eye_stab.filter(|&s| !self.cache.contains(s));
+        let stab = decision.eye_stab.filter(|&s| !self.cache.contains(s));
         let all = stab
             .into_iter()
             .chain(stand_ins.into_iter().map(|x| x.1))
@@ -438,88 +432,29 @@ impl Client {
     }
 }
 
-/// The `impostors` choice (Maciel's traversal over the clusters, [`crate::cluster`]) as the
-/// frame counts it: stood-in objects are not wanted (a box represents them), drawn ones want
-/// their finest allowed LOD. Returns the frame and the texture segments of the boxes drawn.
-fn impostor_choice(
-    t: &mut Traversal,
-    h: &portico_data::hierarchy::Hierarchy,
-    w: &World,
-    p: usize,
-    cands: &[Candidate],
-    cost: &CostModel,
-    cache: &ObjectCache<()>,
-) -> (crate::elision::Frame, Vec<u32>) {
-    let vp = w.frames[p].viewpoint;
-    let pixels = |n: u32| {
-        view::screen_pixels(
-            &h.nodes[n as usize].bounds,
-            &vp.view_proj,
-            vp.size.0,
-            vp.size.1,
-        )
-    };
-    let inside = |n: u32| {
-        let b = &h.nodes[n as usize].bounds;
-        (0..3).all(|i| b.min[i] - 0.05 <= vp.eye[i] && vp.eye[i] <= b.max[i] + 0.05)
-    };
-    let textured = |n: u32| {
-        let s = h.nodes[n as usize].texture;
-        s != u32::MAX && cache.contains(s)
-    };
-    let f = cluster::Frame {
-        pixels: &pixels,
-        eye_inside: &inside,
-        textured: &textured,
-        cost,
-        budget_s: w.dt,
-    };
-    let cut = t.choose(h, cands, &f);
-    let mut frame = crate::elision::Frame {
-        predicted_s: cut.predicted_s,
-        ..Default::default()
-    };
-    for (i, c) in cands.iter().enumerate() {
-        let ch = match cut.lods[i] {
-            Some(l) => {
-                let short = c.lods[..l].iter().filter(|o| !o.resident).count() as u32;
-                frame.lods_skipped += short;
-                Choice {
-                    lod: Some(l),
-                    desired: Some(0),
-                    lods_skipped: short,
-                    object_skipped: false,
-                }
-            }
-            None if cut.stood[i] => Choice::default(),
-            None => {
-                frame.objects_skipped += 1;
-                Choice {
-                    lod: None,
-                    desired: Some(0),
-                    lods_skipped: 0,
-                    object_skipped: true,
-                }
-            }
-        };
-        frame.choices.push(ch);
+/// What the simulated client's cache holds, as the frame decision asks it: a stab list is used
+/// only while its segment is in this client's cache, as the real client does.
+struct Held<'a>(&'a ObjectCache<()>, &'a World);
+
+impl Resident for Held<'_> {
+    fn has(&self, id: u32) -> bool {
+        self.0.contains(id)
     }
-    let textures = cut
-        .boxes
-        .iter()
-        .filter(|(_, stand)| *stand == Stand::Textured)
-        .map(|(n, _)| h.nodes[*n as usize].texture)
-        .collect();
-    (frame, textures)
+
+    fn stab(&self, cell: u32) -> Option<Arc<StabList>> {
+        let seg = self.1.stab_segment(cell)?;
+        self.0
+            .contains(seg)
+            .then(|| self.1.stabs.get(&cell).cloned())
+            .flatten()
+    }
 }
 
-/// One frame's elision, as the IO side needs it.
+/// One frame's decision, as the IO side needs it.
 struct Decided {
-    cands: Vec<Candidate>,
-    choices: Vec<Choice>,
+    decision: Decision,
     /// Per candidate, the segments of its (capped) LODs, finest first.
     segments: Vec<Vec<u32>>,
-    eye_stab: Option<u32>,
 }
 
 /// The items in their first order, each once.

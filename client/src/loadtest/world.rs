@@ -5,14 +5,13 @@
 //! what the elider would draw there if everything were resident.
 
 use crate::cost::CostModel;
-use crate::elision::{Algorithm, Elider};
+use crate::elision::Algorithm;
+use crate::frame::{Decider, Resident, Scene};
 use crate::net::Remote;
-use crate::render::Camera;
 use crate::view::{self, Viewpoint};
 use anyhow::{Context, Result};
 use futures_util::StreamExt;
 use glam::Vec3;
-use portico_data::cells::realtime::Frustum;
 use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::Header;
 use portico_data::geometry::Aabb;
@@ -98,16 +97,13 @@ impl World {
         g.locate(eye).filter(|&c| g.cells[c as usize].live)
     }
 
-    /// The view frustum of a path frame.
-    pub fn frustum(&self, p: usize) -> Frustum {
-        let o = &self.frames[p].observer;
-        Frustum::new(
-            o.eye.into(),
-            o.dir.into(),
-            Vec3::Y,
-            o.half_fov_x,
-            o.half_fov_y,
-        )
+    /// The model as the frame decision sees it.
+    pub fn scene(&self) -> Scene<'_> {
+        Scene {
+            header: &self.header,
+            graph: self.graph.as_ref(),
+            bounds: &self.bounds,
+        }
     }
 }
 
@@ -154,40 +150,18 @@ pub fn path_speeds(path: &CameraPath) -> (f32, f32) {
 pub fn path_frames(path: &CameraPath, dt: f64, far: f32) -> Vec<PathFrame> {
     let n = (path.duration() as f64 / dt).ceil() as usize + 1;
     let (max_speed, max_turn) = path_speeds(path);
-    let half_y = FOVY_DEG.to_radians() * 0.5;
+    let fovy = FOVY_DEG.to_radians();
     let aspect = SCREEN.0 as f32 / SCREEN.1 as f32;
-    let half_x = (half_y.tan() * aspect).atan();
     (0..n)
         .map(|f| {
             let t = (f as f64 * dt) as f32;
             let (eye, dir) = path.sample(t);
             let (next, _) = path.sample(t + dt as f32);
-            let camera = Camera {
-                eye,
-                target: eye + dir,
-                up: Vec3::Y,
-                fovy: FOVY_DEG.to_radians(),
-                near: 0.05,
-                far,
-            };
+            let velocity = (next - eye) / dt as f32;
+            let observer = view::observer(eye, dir, velocity, fovy, aspect, max_speed, max_turn);
             PathFrame {
-                observer: Observer {
-                    eye: eye.into(),
-                    dir: dir.into(),
-                    up: [0.0, 1.0, 0.0],
-                    velocity: ((next - eye) / dt as f32).into(),
-                    half_fov_x: half_x,
-                    half_fov_y: half_y,
-                    max_speed,
-                    max_turn,
-                },
-                viewpoint: Viewpoint {
-                    view_proj: camera.view_proj(aspect),
-                    eye,
-                    dir,
-                    size: SCREEN,
-                    half_fov: half_x,
-                },
+                viewpoint: Viewpoint::of(&observer, SCREEN, far),
+                observer,
             }
         })
         .collect()
@@ -215,7 +189,7 @@ pub async fn load(remote: &Remote, path: &CameraPath, plan: Plan) -> Result<Worl
         Some(_) => Some(remote.cells().await.context("loading the cell graph")?),
         None => None,
     };
-    let far = m.header.bounds.size().length().max(10.0) * 1.5;
+    let far = view::far_plane(&m.header.bounds);
     let mut world = World {
         bounds: m.header.instances.iter().map(|i| i.bounds).collect(),
         header: m.header,
@@ -268,12 +242,25 @@ async fn fetch_stabs(
     Ok(out)
 }
 
-/// Runs visibility (with every stab list known) and the elider (with every LOD resident) along
-/// the marked frames, in path order: what a client that had everything would draw.
+/// Everything resident, every stab list known: what an omniscient client holds.
+struct Omniscient<'a>(&'a World);
+
+impl Resident for Omniscient<'_> {
+    fn has(&self, _: u32) -> bool {
+        true
+    }
+
+    fn stab(&self, cell: u32) -> Option<Arc<StabList>> {
+        self.0.stabs.get(&cell).cloned()
+    }
+}
+
+/// The frame decision with everything resident along the marked frames, in path order: what a
+/// client that had everything would draw.
 fn truth(world: &World, marked: &[bool], dt: f64) -> Vec<Option<Truth>> {
-    let mut elider = Elider::new(Algorithm::Optimize, dt);
+    let mut decider = Decider::new(Algorithm::Optimize, dt, Some(world.size_threshold_px));
     let cost = CostModel::default();
-    let stab = |c: u32| world.stabs.get(&c).cloned();
+    let scene = world.scene();
     let mut out = vec![None; world.path_frames()];
     let mut previous = false;
     for p in 0..world.path_frames() {
@@ -282,30 +269,25 @@ fn truth(world: &World, marked: &[bool], dt: f64) -> Vec<Option<Truth>> {
             continue;
         }
         if !previous {
-            elider.reset();
+            decider.reset();
         }
         previous = true;
-        let frame = &world.frames[p];
-        let vis = view::visible(
-            world.graph.as_ref(),
-            &stab,
-            &world.bounds,
-            &world.frustum(p),
+        let d = decider.decide(
+            &scene,
+            &world.frames[p].viewpoint,
+            &Omniscient(world),
+            &cost,
+            None,
         );
-        let mut cands = view::candidates(&world.header, &vis.objects, &frame.viewpoint, &|_| true);
-        let dropped = view::cap_detail(&mut cands, world.size_threshold_px);
-        let decided = elider.choose(&cands, &cost, None);
         let mut t = Truth::default();
-        t.wants
-            .extend(vis.eye_cell.and_then(|c| world.stab_segment(c)));
+        t.wants.extend(d.eye_stab);
         let mut counted = HashSet::new();
-        for ((c, choice), skip) in cands.iter().zip(&decided.choices).zip(dropped) {
-            let Some(l) = choice.lod.map(|l| l + skip) else {
-                continue;
-            };
-            let lods = world.header.lods_of(&world.header.instances[c.id as usize]);
-            t.wants.push(lods[l].segment);
-            for lod in &lods[l..] {
+        for o in &d.drawn {
+            t.wants.push(o.segment);
+            let lods = world
+                .header
+                .lods_of(&world.header.instances[o.instance as usize]);
+            for lod in &lods[o.lod..] {
                 if counted.insert(lod.segment) {
                     t.visible_bytes += world.bytes(lod.segment);
                 }

@@ -166,31 +166,7 @@ pub struct Draw<'a> {
     pub color: [f32; 4],
 }
 
-/// A perspective viewpoint.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Camera {
-    /// Eye position (world).
-    pub eye: Vec3,
-    /// Point looked at (world).
-    pub target: Vec3,
-    /// Up direction (world).
-    pub up: Vec3,
-    /// Vertical field of view in radians, in `(0, π)`.
-    pub fovy: f32,
-    /// Near plane distance, `> 0`.
-    pub near: f32,
-    /// Far plane distance, `> near`.
-    pub far: f32,
-}
-
-impl Camera {
-    /// World-to-clip matrix: right-handed view, WebGPU clip space (depth 0..1, y up).
-    pub fn view_proj(&self, aspect: f32) -> Mat4 {
-        let proj =
-            glam::camera::rh::proj::directx::perspective(self.fovy, aspect, self.near, self.far);
-        proj * glam::camera::rh::view::look_at_mat4(self.eye, self.target, self.up)
-    }
-}
+pub use crate::view::Camera;
 
 /// What one frame cost and contained.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
