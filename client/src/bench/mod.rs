@@ -880,8 +880,6 @@ fn machine() -> Machine {
     }
 }
 
-/// Whether `p` lies inside `b` grown by `margin` (a box around the eye cannot stand in).
-
 #[cfg(test)]
 mod tests {
     use super::*;
