@@ -9,10 +9,10 @@
 
 use futures_util::{SinkExt, StreamExt};
 use portico_client::elision::Algorithm;
-use portico_client::loadtest::{Link, LoadtestConfig, run as run_loadtest};
 use portico_client::policy::policy_spec;
-use portico_client::walk::{WalkConfig, walk};
 use portico_data::path::{PathKind, generate};
+use portico_lab::loadtest::{Link, LoadtestConfig, run as run_loadtest};
+use portico_native::walk::{WalkConfig, walk};
 use portico_protocol::{PROTOCOL_VERSION, Policy, ServerFrame, StreamClient};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};

@@ -1,22 +1,26 @@
-//! The Portico client (DESIGN §5): wgpu renderer, LRU cache, detail elision, prefetch.
+//! The platform-free core of the Portico client: everything a walkthrough client decides, with
+//! no IO, no threads and no GPU, so the native walker, the measuring lab and a browser client
+//! share it (it compiles for `wasm32-unknown-unknown`).
+//!
+//! - [`frame`]: the one frame decision — visibility, candidates, detail elision or the
+//!   cluster traversal over resident LODs, and what the cache must hear.
+//! - [`view`]: the viewpoint of a frame, visibility through the cells (Funkhouser §4.1.2) and
+//!   the candidates' screen sizes.
+//! - [`elision`]: detail elision (Funkhouser §4.2: static, feedback, cost/benefit optimisation).
+//! - [`cluster`]: Maciel's best-first traversal of the model hierarchy (§6.4).
+//! - [`cost`]: the cost model (§4.2.3) and its online correction.
+//! - [`cache`]: the LRU object cache under a hard byte budget (§5.2.3).
+//! - [`schedule`]: the read schedule of the IO stage (§5.2.3, Ch. 6).
+//! - [`navigate`]: Funkhouser's mouse-and-keyboard navigation (§3.3.1).
+//! - [`policy`], [`stats`]: prefetch policy specs, per-frame statistics.
 
-pub mod bench;
 pub mod cache;
 pub mod cluster;
 pub mod cost;
 pub mod elision;
 pub mod frame;
-pub mod impostor;
-pub mod io;
-pub mod loadtest;
 pub mod navigate;
-pub mod net;
 pub mod policy;
-pub mod render;
 pub mod schedule;
-pub mod sheet;
 pub mod stats;
 pub mod view;
-pub mod walk;
-#[cfg(feature = "window")]
-pub mod window;

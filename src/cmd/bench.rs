@@ -1,13 +1,13 @@
 //! `portico bench --db FILE.portico (--path FILE | --path-kind tour [--legs L --seed S])
 //! --budget-ms B [--size 320x240] [--max-frames F] [--algorithms regular,none,static,feedback,optimize]
 //! --out DIR`: frame rate and image fidelity of the detail elision algorithms (DESIGN §7,
-//! Funkhouser Table 4.3 / Fig. 4.22, RRB §5.2-5.3). The work is `portico_client::bench`.
+//! Funkhouser Table 4.3 / Fig. 4.22, RRB §5.2-5.3). The work is `portico_lab::bench`.
 
 use crate::progress::Bars;
 use anyhow::Result;
-use portico_client::bench::{BenchConfig, BenchSummary, RunKind, report};
 use portico_data::Database;
 use portico_data::path::CameraPath;
+use portico_lab::bench::{BenchConfig, BenchSummary, RunKind, report};
 use std::path::PathBuf;
 
 /// Arguments of `portico bench`.
@@ -66,7 +66,7 @@ pub fn run(a: Args) -> Result<()> {
     cfg.fovy = a.fov.clamp(10.0, 150.0).to_radians();
     let bars = Bars::new();
     let mut started = false;
-    let summary = portico_client::bench::run(&cfg, &mut |_, total| {
+    let summary = portico_lab::bench::run(&cfg, &mut |_, total| {
         if !started {
             bars.start("bench", total);
             started = true;

@@ -2,10 +2,10 @@
 
 use crate::progress::Bars;
 use anyhow::{Context, Result};
-use portico_client::impostor::Painter;
 use portico_data::build::{BuildOptions, build_with};
 use portico_data::hierarchy::ImpostorPainter;
 use portico_data::import::import_file;
+use portico_render::impostor::Painter;
 use std::path::PathBuf;
 use std::time::Instant;
 

@@ -9,16 +9,16 @@ use crate::cmd::walk::print_summary;
 use crate::progress::Bars;
 use anyhow::{Context, Result};
 use portico_client::elision::Algorithm;
-use portico_client::loadtest::{Link, LoadtestConfig, LoadtestSummary, run as run_loadtest};
 use portico_client::policy::policy_spec;
-use portico_client::render::Renderer;
-use portico_client::walk::{WalkConfig, WalkSummary, walk};
 use portico_data::Database;
 use portico_data::build::{BuildOptions, build_with};
 use portico_data::import::import_file;
 use portico_data::path::{CameraPath, PathKind, generate};
 use portico_generator::{Params, Preset};
+use portico_lab::loadtest::{Link, LoadtestConfig, LoadtestSummary, run as run_loadtest};
+use portico_native::walk::{WalkConfig, WalkSummary, walk};
 use portico_protocol::Policy;
+use portico_render::Renderer;
 use portico_server::{AppState, Config};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -142,7 +142,7 @@ fn generate_building(a: &Args, glb: &Path) -> Result<()> {
 
 fn build_database(glb: &Path, db: &Path) -> Result<()> {
     let bars = Bars::new();
-    let mut painter = portico_client::impostor::Painter::new().ok();
+    let mut painter = portico_render::impostor::Painter::new().ok();
     let r = build_with(
         import_file(glb)?,
         db,
@@ -222,14 +222,14 @@ fn pictures(a: &Args, db: &Path, path: &CameraPath, out: &Path) -> Result<Pictur
         .iter()
         .filter_map(|p| image::open(p).ok().map(|i| i.to_rgba8()))
         .collect();
-    let sheet = match portico_client::sheet::contact_sheet(&images, 4, 240) {
+    let sheet = match portico_render::sheet::contact_sheet(&images, 4, 240) {
         Some(s) => s.save(out.join("contact_sheet.png")).is_ok(),
         None => false,
     };
     let (w, h) = crate::cmd::walk::parse_size(&a.size)?;
     let mut r = Renderer::new(w * 2, h * 2)?;
     let db = Database::open(db)?;
-    let img = portico_client::sheet::birdseye(&mut r, &db, path)?;
+    let img = portico_render::sheet::birdseye(&mut r, &db, path)?;
     let birdseye = img.save(out.join("birdseye.png")).is_ok();
     Ok(Pictures { sheet, birdseye })
 }

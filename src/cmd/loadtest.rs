@@ -6,9 +6,9 @@
 
 use crate::progress::Bars;
 use anyhow::{Context, Result};
-use portico_client::loadtest::stress::{StressConfig, level};
-use portico_client::loadtest::{Link, LoadtestConfig, LoadtestSummary, grid, run as run_loadtest};
 use portico_client::policy::{parse_policy, policy_spec};
+use portico_lab::loadtest::stress::{StressConfig, level};
+use portico_lab::loadtest::{Link, LoadtestConfig, LoadtestSummary, grid, run as run_loadtest};
 use portico_protocol::Policy;
 use std::path::PathBuf;
 

@@ -3,11 +3,11 @@
 //! model without rooms), for walks, load tests and benchmarks.
 
 use anyhow::{Context, Result};
-use portico_client::net::Remote;
 use portico_data::Database;
 use portico_data::cells::CellGraph;
 use portico_data::geometry::Aabb;
 use portico_data::path::{CameraPath, PathKind, standard};
+use portico_native::net::Remote;
 use std::path::PathBuf;
 
 /// Which standard path.

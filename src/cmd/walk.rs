@@ -4,10 +4,10 @@
 use crate::progress::Bars;
 use anyhow::{Context, Result, bail};
 use portico_client::elision::Algorithm;
-use portico_client::net::Remote;
 use portico_client::policy::parse_policy;
-use portico_client::walk::{WalkConfig, WalkSummary, walk};
 use portico_data::path::CameraPath;
+use portico_native::net::Remote;
+use portico_native::walk::{WalkConfig, WalkSummary, walk};
 use portico_protocol::Policy;
 use std::path::PathBuf;
 
@@ -152,7 +152,7 @@ pub fn run(a: Args) -> Result<()> {
 
 #[cfg(feature = "window")]
 fn interactive(cfg: &WalkConfig, record: Option<PathBuf>) -> Result<WalkSummary> {
-    portico_client::window::run(cfg, &portico_client::window::WindowOptions { record })
+    portico_native::window::run(cfg, &portico_native::window::WindowOptions { record })
 }
 
 #[cfg(not(feature = "window"))]

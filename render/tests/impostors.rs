@@ -3,12 +3,12 @@
 //! looks like the objects it stands in for.
 
 use glam::Mat4;
-use portico_client::impostor::{Painter, face_view};
-use portico_client::render::{Draw, Renderer};
 use portico_data::Database;
 use portico_data::build::{BuildOptions, Quiet, build_with};
 use portico_data::hierarchy::ImpostorPainter;
 use portico_data::import::import_file;
+use portico_render::impostor::{Painter, face_view};
+use portico_render::{Draw, Renderer};
 use std::path::Path;
 
 fn build_tiny(dir: &Path) -> Database {

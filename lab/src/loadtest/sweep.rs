@@ -3,7 +3,7 @@
 //! lookahead cull any | plane | frustum. The whole grid is 144 runs; named subsets reproduce one
 //! table each, and `reduced` (the default of `--sweep`) touches every axis in 13 runs.
 
-use crate::policy::policy_spec;
+use portico_client::policy::policy_spec;
 use portico_protocol::{Granularity, LookaheadCull, Policy, RangeCull};
 
 /// Funkhouser's lookahead depths (frames).

@@ -5,25 +5,25 @@
 //! RESIDENT LODs only → render → publish the observer and the held set to the IO stage. The
 //! loop never waits for the network: what has not arrived is skipped and counted (§5.2.4).
 
-use crate::cache::ObjectCache;
-use crate::cluster::Stand;
-use crate::cost::{CostModel, OnlineCost};
-use crate::elision::Algorithm;
-use crate::frame::{Decider, Scene};
+use crate::drive::{Ask, Event};
 use crate::io::{Catalogue, IoConfig, IoStage, Payload};
 use crate::net::Remote;
-use crate::render::{Draw, GpuImpostor, GpuMesh, Renderer};
-use crate::schedule::{Ask, Event};
-use crate::stats::{FrameRow, Series, write_csv};
-use crate::view::{self, Viewpoint};
 use anyhow::{Context, Result};
 use glam::{Mat4, Vec3};
+use portico_client::cache::ObjectCache;
+use portico_client::cluster::Stand;
+use portico_client::cost::{CostModel, OnlineCost};
+use portico_client::elision::Algorithm;
+use portico_client::frame::{Decider, Scene};
+use portico_client::stats::{FrameRow, Series, write_csv};
+use portico_client::view::{self, Viewpoint};
 use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::Header;
-use portico_data::geometry::{Mesh, Vertex, encode_geometry};
+use portico_data::geometry::encode_geometry;
 use portico_data::hierarchy::{Hierarchy, colour_box};
 use portico_data::path::CameraPath;
 use portico_protocol::{Observer, Policy};
+use portico_render::{Draw, GpuImpostor, GpuMesh, Renderer};
 use serde::Serialize;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -204,7 +204,7 @@ impl<'a> Session<'a> {
         let model = load_model(&remote)?;
         let mut renderer =
             Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
-        let cost = calibrate(&mut renderer)?;
+        let cost = portico_render::calibrate(&mut renderer)?;
         let policy = Policy {
             impostors: cfg.elision == Algorithm::Impostors,
             cache_bytes: cfg.cache_bytes,
@@ -351,31 +351,6 @@ fn load_model(remote: &Remote) -> Result<Model> {
     })
 }
 
-/// Funkhouser §4.2.3: C1, C2, C3 from timed sample draws at start-up (the walk and the
-/// benchmark both start this way).
-pub(crate) fn calibrate(r: &mut Renderer) -> Result<CostModel> {
-    let n = 24u32;
-    let mut mesh = Mesh::default();
-    for j in 0..=n {
-        for i in 0..=n {
-            let p = [i as f32 / n as f32, j as f32 / n as f32, 0.0];
-            mesh.vertices
-                .push(Vertex::new(p, [0.0, 0.0, 1.0], [0.8, 0.8, 0.8, 1.0]));
-        }
-    }
-    for j in 0..n {
-        for i in 0..n {
-            let a = j * (n + 1) + i;
-            mesh.indices
-                .extend([a, a + 1, a + n + 1, a + 1, a + n + 2, a + n + 1]);
-        }
-    }
-    let gpu = r.upload(&encode_geometry(&mesh))?;
-    let geometry = r.sample_costs(&gpu, &[1, 16, 64, 128])?;
-    let fill = r.sample_fill(&[0.25, 0.5, 1.0])?;
-    Ok(CostModel::calibrate(&geometry, &fill))
-}
-
 /// The frame loop's state.
 struct Walker<'a> {
     cfg: &'a WalkConfig,
@@ -481,7 +456,7 @@ impl<'a> Walker<'a> {
         )
     }
 
-    /// The frame decision ([`crate::frame`]), then its draws on the GPU.
+    /// The frame decision ([`portico_client::frame`]), then its draws on the GPU.
     fn frame(&mut self, r: &mut Renderer, obs: &Observer, row: &mut FrameRow) -> Result<()> {
         let view = Viewpoint::of(
             obs,
@@ -556,7 +531,7 @@ impl<'a> Walker<'a> {
                 .collect(),
             consumed: self.consumed,
             wants: None,
-            at: tokio::time::Instant::now(),
+            at: std::time::Instant::now(),
         }));
     }
 
@@ -622,7 +597,7 @@ impl<'a> Walker<'a> {
 /// What the walker's cache holds, as the frame decision asks it.
 struct Cached<'a>(&'a ObjectCache<Resident>, &'a Scene<'a>);
 
-impl crate::frame::Resident for Cached<'_> {
+impl portico_client::frame::Resident for Cached<'_> {
     fn has(&self, id: u32) -> bool {
         self.0.contains(id)
     }

@@ -1,7 +1,7 @@
 //! Pictures for reports: a contact sheet of walk frames, and a bird's-eye view of the storey a
 //! path walks through with the path marked on it (Funkhouser Fig. 3.27's debugging view).
 
-use crate::render::{Draw, Renderer};
+use crate::{Draw, Renderer};
 use anyhow::{Context, Result};
 use glam::{Mat4, Vec3};
 use image::RgbaImage;

@@ -1,15 +1,15 @@
 //! `portico walk --window` (cargo feature `window`): the same client in a window, driven by the
-//! mouse and keyboard as Funkhouser §3.3.1 describes ([`crate::navigate`]), optionally recording
+//! mouse and keyboard as Funkhouser §3.3.1 describes ([`portico_client::navigate`]), optionally recording
 //! the walk as a path (`--record`) that `portico walk --path` and `portico bench` replay.
 //!
-//! Frames are rendered by the same offscreen [`crate::render::Renderer`] as headless walks and
+//! Frames are rendered by the same offscreen [`portico_render::Renderer`] as headless walks and
 //! shown through a software framebuffer (softbuffer), so the window works wherever the headless
 //! client does (llvmpipe included) at the price of one read-back per frame. The frame loop
 //! never waits for the network, exactly as in [`crate::walk`]; frames are paced to the budget.
 
-use crate::navigate::{Controls, Navigator, Recorder, Step};
 use crate::walk::{Session, WalkConfig, WalkSummary};
 use anyhow::{Context as _, Result};
+use portico_client::navigate::{Controls, Navigator, Recorder, Step};
 use std::num::NonZeroU32;
 use std::path::PathBuf;
 use std::rc::Rc;

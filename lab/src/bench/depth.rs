@@ -173,7 +173,7 @@ fn clip_near(tri: &[Vec4; 3]) -> Vec<Vec4> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::render::Camera;
+    use portico_render::Camera;
 
     const W: u32 = 64;
     const H: u32 = 48;

@@ -1,17 +1,17 @@
 //! The lookahead/IO stage (Funkhouser Ch. 6 and §5.2.3), on its own thread with its own tokio
 //! runtime: it takes the latest observer the render stage published, asks the server for the
 //! read set, keeps a few segment fetches going from the top of the latest one
-//! ([`crate::schedule::drive`]), checks every segment against the manifest's checksum, uploads
+//! ([`crate::drive::drive`]), checks every segment against the manifest's checksum, uploads
 //! geometry to the GPU (the upload stage) and hands the results to the render stage through a
 //! bounded queue. The render stage never waits for it.
 
+use crate::drive::{Ask, Event, Fetcher, Items, drive};
 use crate::net::Remote;
-use crate::render::{GpuImpostor, GpuMesh, Uploader};
-use crate::schedule::{Ask, Event, Fetcher, Items, drive};
 use anyhow::bail;
 use portico_data::cells::StabList;
 use portico_data::geometry::Aabb;
 use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse, SegmentInfo};
+use portico_render::{GpuImpostor, GpuMesh, Uploader};
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use tokio::sync::{mpsc, watch};

@@ -10,10 +10,10 @@
 //! over loopback HTTP/1.1 with keep-alive; the server's own compute time comes with each answer.
 
 use super::world::path_frames;
-use crate::net::Remote;
-use crate::stats::Series;
 use anyhow::{Context, Result};
+use portico_client::stats::Series;
 use portico_data::path::CameraPath;
+use portico_native::net::Remote;
 use portico_protocol::{PROTOCOL_VERSION, Policy, PrefetchRequest};
 use serde::Serialize;
 use std::collections::HashSet;

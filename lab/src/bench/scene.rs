@@ -4,7 +4,6 @@
 //! segment (object definitions are shared by their instances, which only transform them).
 
 use super::critical::{CriticalCounts, CriticalParams, CriticalSet, critical_vertices};
-use crate::render::{GpuImpostor, GpuMesh, Renderer};
 use anyhow::{Context, Result};
 use glam::{Mat4, Vec3};
 use portico_data::Database;
@@ -12,6 +11,7 @@ use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::{Header, LodRecord};
 use portico_data::geometry::{Aabb, GeometryView, encode_geometry};
 use portico_data::hierarchy::colour_box;
+use portico_render::{GpuImpostor, GpuMesh, Renderer};
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::path::Path;
@@ -188,12 +188,12 @@ impl Scene {
 
     /// The far plane distance for cameras in this model (as the walk client uses).
     pub fn far(&self) -> f32 {
-        crate::view::far_plane(&self.header.bounds)
+        portico_client::view::far_plane(&self.header.bounds)
     }
 
     /// The model as the frame decision sees it.
-    pub fn frame_scene(&self) -> crate::frame::Scene<'_> {
-        crate::frame::Scene {
+    pub fn frame_scene(&self) -> portico_client::frame::Scene<'_> {
+        portico_client::frame::Scene {
             header: &self.header,
             graph: self.graph.as_ref(),
             bounds: &self.bounds,

@@ -14,9 +14,9 @@
 //!
 //! * `regular`: RRB's baseline and the fidelity reference: the finest LOD of every visible
 //!   object, no budget, no elision work;
-//! * `none`, `static`, `feedback`, `optimize`: [`crate::elision::Elider`] with the frame budget,
+//! * `none`, `static`, `feedback`, `optimize`: [`portico_client::elision::Elider`] with the frame budget,
 //!   fed the measured frame times and the online-corrected, start-up-calibrated cost model
-//!   exactly as the walk client does (`crate::walk`);
+//!   exactly as the walk client does (`portico_native::walk`);
 //! * `coarsest` (optional): the coarsest LOD of everything, a lower bound on fidelity.
 //!
 //! The runs advance in **lockstep**: for each frame the Regular frame is drawn first, then every
@@ -32,7 +32,7 @@
 //! ## Measures
 //!
 //! Per run (see [`RunSummary`]): frame time mean, min, max, mean absolute deviation (RRB eq.
-//! 5.2), sd, p50/p95/p99 ([`crate::stats::Series`]), frames over budget, polygons drawn, Es and
+//! 5.2), sd, p50/p95/p99 ([`portico_client::stats::Series`]), frames over budget, polygons drawn, Es and
 //! Et (formulas in [`fidelity`]), PSNR against the Regular frame with the same index. Critical
 //! vertices are chosen per geometry segment once ([`critical`]), transformed by each instance,
 //! and tested for visibility against a CPU depth buffer of the reference frame ([`depth`]).
@@ -52,21 +52,21 @@ pub mod plot;
 pub mod report;
 pub mod scene;
 
-use crate::cluster::Stand;
-use crate::cost::{CostModel, OnlineCost};
-use crate::elision::Algorithm;
-use crate::frame::Decider;
-use crate::render::GpuImpostor;
-use crate::render::{Draw, Renderer};
-use crate::stats::Series;
-use crate::view::{self, NEAR};
 use anyhow::{Context, Result, bail, ensure};
 use critical::{CriticalCounts, CriticalParams};
 use depth::DepthBuffer;
 use fidelity::{FidelityAccumulator, RefPoint};
 use glam::Mat4;
 use image::RgbaImage;
+use portico_client::cluster::Stand;
+use portico_client::cost::{CostModel, OnlineCost};
+use portico_client::elision::Algorithm;
+use portico_client::frame::Decider;
+use portico_client::stats::Series;
+use portico_client::view::{self, NEAR};
 use portico_data::path::CameraPath;
+use portico_render::GpuImpostor;
+use portico_render::{Draw, Renderer};
 use scene::Scene;
 use serde::Serialize;
 use std::fmt;
@@ -84,7 +84,7 @@ pub enum RunKind {
     /// The coarsest LOD of every visible object (a fidelity lower bound).
     Coarsest,
     /// Maciel's cluster traversal with the frame budget: far clusters as textured or
-    /// average-colour boxes, the rest as objects ([`crate::cluster`]).
+    /// average-colour boxes, the rest as objects ([`portico_client::cluster`]).
     Impostors,
 }
 
@@ -458,7 +458,7 @@ pub fn run(cfg: &BenchConfig, progress: &mut dyn FnMut(u64, u64)) -> Result<Benc
     let mut renderer = Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
     let scene = Scene::load(&cfg.db, &renderer, &cfg.critical)?;
     // Funkhouser §4.2.3: C1, C2, C3 from timed sample draws at start-up, as the walk client.
-    let cost = crate::walk::calibrate(&mut renderer)?;
+    let cost = portico_render::calibrate(&mut renderer)?;
     let mut bench = Bench::new(cfg, &scene, cost);
     bench.run(&mut renderer, progress)?;
     let mut summary = bench.summarise(&renderer, start.elapsed().as_secs_f64());
@@ -508,7 +508,7 @@ impl RunKind {
 /// they have.
 struct Everything<'a>(&'a Scene);
 
-impl crate::frame::Resident for Everything<'_> {
+impl portico_client::frame::Resident for Everything<'_> {
     fn has(&self, _: u32) -> bool {
         true
     }
@@ -602,7 +602,7 @@ impl<'a> Bench<'a> {
         }
     }
 
-    /// The frame decision ([`crate::frame`]) and render of run `k`'s frame; returns its record
+    /// The frame decision ([`portico_client::frame`]) and render of run `k`'s frame; returns its record
     /// and the drawn `(instance, lod)` pairs sorted by instance.
     fn draw(
         &mut self,

@@ -4,18 +4,18 @@
 //! own cache, exactly as the real client does), and for the oracle the "truth" of every frame:
 //! what the elider would draw there if everything were resident.
 
-use crate::cost::CostModel;
-use crate::elision::Algorithm;
-use crate::frame::{Decider, Resident, Scene};
-use crate::net::Remote;
-use crate::view::{self, Viewpoint};
 use anyhow::{Context, Result};
 use futures_util::StreamExt;
 use glam::Vec3;
+use portico_client::cost::CostModel;
+use portico_client::elision::Algorithm;
+use portico_client::frame::{Decider, Resident, Scene};
+use portico_client::view::{self, Viewpoint};
 use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::Header;
 use portico_data::geometry::Aabb;
 use portico_data::path::CameraPath;
+use portico_native::net::Remote;
 use portico_protocol::Observer;
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;

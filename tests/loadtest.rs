@@ -1,9 +1,9 @@
 //! `portico loadtest` end to end on the tiny building: a real server on 127.0.0.1:0 (in this
 //! process), simulated clients through emulated links, one prefetch policy and both baselines.
 
-use portico_client::loadtest::{Link, LinkError, LoadtestConfig, LoadtestSummary, run};
 use portico_client::policy::{parse_policy, policy_spec};
 use portico_data::path::{CameraPath, PathKind, generate};
+use portico_lab::loadtest::{Link, LinkError, LoadtestConfig, LoadtestSummary, run};
 use portico_protocol::Policy;
 use std::path::{Path, PathBuf};
 

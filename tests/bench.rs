@@ -2,9 +2,9 @@
 //! every run replays the same frames, Regular scores zero against itself, a coarse run does not,
 //! and the report, CSV and plots are written.
 
-use portico_client::bench::{BenchConfig, BenchSummary, RunKind, RunSummary, report, run};
 use portico_client::elision::Algorithm;
 use portico_data::path::{PathKind, generate};
+use portico_lab::bench::{BenchConfig, BenchSummary, RunKind, RunSummary, report, run};
 use std::path::Path;
 
 const FRAMES: u64 = 20;

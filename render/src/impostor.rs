@@ -4,7 +4,7 @@
 //! and lets what is behind its gaps show through. `portico build` hands a [`Painter`] to
 //! [`portico_data::build::build_with`].
 
-use crate::render::{Draw, GpuMesh, RenderError, Renderer};
+use crate::{Draw, GpuMesh, RenderError, Renderer};
 use glam::{Mat4, Vec3};
 use image::RgbaImage;
 use portico_data::geometry::{Aabb, encode_geometry};

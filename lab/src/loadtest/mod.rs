@@ -3,8 +3,8 @@
 //! Figures 5.11–5.13), but over a network.
 //!
 //! Each client is a tokio task playing the real client's frame loop without a GPU
-//! ([`sim`]): the same byte-budgeted [`crate::cache::ObjectCache`], the same visibility and
-//! candidates ([`crate::view`]), the same `optimize` elider with the default cost model, frames
+//! ([`sim`]): the same byte-budgeted [`portico_client::cache::ObjectCache`], the same visibility and
+//! candidates ([`portico_client::view`]), the same `optimize` elider with the default cost model, frames
 //! at the frame budget in real time, and the render never waits: what is not resident is
 //! skipped and counted. Clients replay one path, client `i` starting `i/N` of the way along it
 //! (wrapping), and talk HTTP to the server (`/v1/prefetch`, `/v1/segments/{id}`) through an
@@ -30,10 +30,10 @@ pub mod world;
 pub use link::{Link, LinkError};
 pub use sweep::{UnknownSweep, grid};
 
-use crate::net::Remote;
-use crate::stats::Series;
 use anyhow::{Context, Result, bail};
+use portico_client::stats::Series;
 use portico_data::path::CameraPath;
+use portico_native::net::Remote;
 use portico_protocol::Policy;
 use serde::Serialize;
 use sim::{ClientResult, FrameStat, Mode};

@@ -4,7 +4,7 @@
 //! elider choose among RESIDENT LODs with the default cost model, and counts what it had to give
 //! up (LODs skipped, objects skipped: Funkhouser §5.2.4). It never waits for the network.
 //!
-//! Its IO task is the real client's ([`crate::schedule::drive`]) fetching through the client's
+//! Its IO task is the real client's ([`portico_native::drive::drive`]) fetching through the client's
 //! emulated [`Pipe`], with its need list made in one of three ways:
 //! - [`Mode::Prefetch`]: the server's lookahead, as the real client: post the observer and the
 //!   held set to `/v1/prefetch` once per frame, demote the eviction hints, read the latest
@@ -16,20 +16,21 @@
 
 use super::link::Pipe;
 use super::world::World;
-use crate::cache::ObjectCache;
-use crate::cost::CostModel;
-use crate::elision::{Algorithm, Candidate, Choice};
-use crate::frame::{Decider, Decision, Resident};
-use crate::net::Remote;
-use crate::schedule::{Ask, Event, Fetcher, Items, drive};
+use portico_client::cache::ObjectCache;
+use portico_client::cost::CostModel;
+use portico_client::elision::{Algorithm, Candidate, Choice};
+use portico_client::frame::{Decider, Decision, Resident};
 use portico_data::cells::StabList;
+use portico_native::drive::{Ask, Event, Fetcher, Items, drive};
+use portico_native::net::Remote;
 use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse};
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
+use std::time::Instant;
 use tokio::sync::{mpsc, watch};
-use tokio::time::{Instant, MissedTickBehavior};
+use tokio::time::MissedTickBehavior;
 
 /// How a simulated client gets its data.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -528,7 +529,7 @@ impl Fetcher for Linked {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::elision::LodOption;
+    use portico_client::elision::LodOption;
 
     #[test]
     fn a_skipped_object_counts_every_level_it_lacks() {

@@ -2,8 +2,8 @@
 //! walking a tour through it (wgpu on llvmpipe).
 
 use portico_client::elision::Algorithm;
-use portico_client::walk::{WalkConfig, walk};
 use portico_data::path::{PathKind, generate};
+use portico_native::walk::{WalkConfig, walk};
 use portico_protocol::Policy;
 use portico_server::AppState;
 use std::path::PathBuf;
@@ -103,7 +103,7 @@ fn full_detail(
     size: (u32, u32),
     fovy: f32,
 ) -> image::RgbaImage {
-    use portico_client::render::{Camera, Draw, Renderer};
+    use portico_render::{Camera, Draw, Renderer};
     let mut r = Renderer::new(size.0, size.1).unwrap();
     let h = db.header();
     let meshes: Vec<_> = h

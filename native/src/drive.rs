@@ -1,0 +1,256 @@
+//! The IO stage's driver: runs the read [`Schedule`] over HTTP (Funkhouser §5.2.3 and Ch. 6).
+//!
+//! [`drive`] is shared by the real client ([`crate::io`]) and the load tester's simulated
+//! clients (`portico_lab::loadtest`); what differs is the [`Fetcher`] (HTTP and a GPU upload,
+//! or HTTP through an emulated link) and where the need list comes from:
+//! - from the server: each published frame state becomes a `POST /v1/prefetch` (one at a time;
+//!   a newer state waits for the answer in flight), and the answer's items become the list;
+//! - from the client itself ([`Ask::wants`]): demand fetch and the oracle of the load tester.
+
+use portico_client::schedule::Schedule;
+use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
+use std::collections::{HashMap, HashSet};
+use std::future::Future;
+use std::time::Instant;
+use tokio::sync::{mpsc, watch};
+use tokio::task::{JoinHandle, JoinSet};
+
+/// What the frame loop publishes after each frame.
+#[derive(Debug, Clone)]
+pub struct Ask {
+    /// The observer, for the server's lookahead.
+    pub observer: Observer,
+    /// Segments resident in the cache.
+    pub held: Vec<u32>,
+    /// How many events the frame loop has taken from the queue so far.
+    pub consumed: u64,
+    /// The client's own need list, most urgent first (demand fetch, oracle); `None` asks the
+    /// server's lookahead instead.
+    pub wants: Option<Vec<u32>>,
+    /// When the frame loop published this.
+    pub at: Instant,
+}
+
+/// What the driver hands the frame loop.
+#[derive(Debug)]
+pub enum Event<B> {
+    /// A prefetch answer (its items are already scheduled; its eviction hints are for the
+    /// cache).
+    Answer(Box<PrefetchResponse>),
+    /// A segment arrived.
+    Segment {
+        /// Segment id.
+        id: u32,
+        /// What the fetcher made of it.
+        body: B,
+        /// Bytes on the wire.
+        bytes: u64,
+        /// When a need list first asked for it.
+        listed_at: Instant,
+    },
+    /// A request failed (the walk goes on; a later list may ask again).
+    Failed(String),
+    /// The server no longer serves the database this client reads (rebuilt and reloaded): the
+    /// IO stage has stopped, rather than fetch another file's segments by the old ids. The walk
+    /// goes on with what it holds.
+    Stale(String),
+}
+
+/// How the driver talks to the server.
+pub trait Fetcher: Clone + Send + Sync + 'static {
+    /// A fetched segment, ready for the cache.
+    type Body: Send + 'static;
+    /// `POST /v1/prefetch`.
+    fn prefetch(
+        &self,
+        req: PrefetchRequest,
+    ) -> impl Future<Output = anyhow::Result<PrefetchResponse>> + Send + 'static;
+    /// `GET /v1/batch`: the segments, each checked and decoded (or why not), with its size on
+    /// the wire; the whole request may fail too.
+    fn batch(
+        &self,
+        ids: Vec<u32>,
+    ) -> impl Future<Output = anyhow::Result<Items<Self::Body>>> + Send + 'static;
+    /// A segment's size in bytes (from the manifest), to size the batches.
+    fn bytes(&self, id: u32) -> u64;
+}
+
+/// Runs the IO stage until the frame loop goes away: keeps `parallel` segment fetches busy from
+/// the latest need list and sends what happens on `tx`.
+pub async fn drive<F: Fetcher>(
+    fetcher: F,
+    policy: Policy,
+    parallel: usize,
+    mut state: watch::Receiver<Option<Ask>>,
+    tx: mpsc::Sender<Event<F::Body>>,
+) {
+    let mut s = Schedule::default();
+    let mut seq = 0u64;
+    let mut fetches: JoinSet<Fetched<F::Body>> = JoinSet::new();
+    // What each read request in flight asked for (a task that panics must not strand them).
+    let mut batches: HashMap<tokio::task::Id, Vec<u32>> = HashMap::new();
+    let mut asking: Option<JoinHandle<Answered>> = None;
+    // A frame state the server has not yet been asked about.
+    let mut unasked: Option<Ask> = None;
+    loop {
+        if asking.is_none()
+            && let Some(ask) = unasked.take()
+        {
+            asking = Some(ask_server(&fetcher, &mut s, policy, ask));
+        }
+        while fetches.len() < parallel.max(1) {
+            let ids = s.next_batch(Instant::now(), |id| fetcher.bytes(id));
+            if ids.is_empty() {
+                break;
+            }
+            let f = fetcher.clone();
+            let asked = ids.clone();
+            let task = fetches.spawn(async move {
+                let got = f.batch(ids.clone()).await;
+                (ids, got)
+            });
+            batches.insert(task.id(), asked);
+        }
+        let event = tokio::select! {
+            changed = state.changed() => {
+                if changed.is_err() {
+                    break;
+                }
+                let Some(ask) = state.borrow_and_update().clone() else { continue };
+                s.acknowledge(ask.consumed, ask.wants.is_none());
+                match ask.wants {
+                    Some(ref wants) => s.refresh(wants.clone(), ask.at),
+                    None => unasked = Some(ask),
+                }
+                continue;
+            }
+            answered = async { asking.as_mut().expect("guarded").await }, if asking.is_some() => {
+                asking = None;
+                match answered {
+                    Ok((ask, at, Ok(resp))) => {
+                        s.answered(ask);
+                        s.refresh(resp.items.iter().map(|i| i.segment).collect(), at);
+                        Event::Answer(Box::new(resp))
+                    }
+                    Ok((_, _, Err(e))) if e.downcast_ref::<crate::net::Stale>().is_some() => {
+                        let _ = tx.send(Event::Stale(format!("{e:#}"))).await;
+                        break;
+                    }
+                    Ok((_, _, Err(e))) => Event::Failed(format!("{e:#}")),
+                    Err(e) => Event::Failed(format!("prefetch task: {e}")),
+                }
+            }
+            Some(done) = fetches.join_next_with_id(), if !fetches.is_empty() => {
+                let (ids, got) = match done {
+                    Ok((task, (ids, got))) => {
+                        batches.remove(&task);
+                        (ids, got)
+                    }
+                    // The task panicked (a decoder or the GPU upload): its segments failed.
+                    Err(e) => {
+                        let ids = batches.remove(&e.id()).unwrap_or_default();
+                        (ids, Err(anyhow::anyhow!("read task: {e}")))
+                    }
+                };
+                if let Err(e) = &got
+                    && e.downcast_ref::<crate::net::Stale>().is_some()
+                {
+                    let _ = tx.send(Event::Stale(format!("{e:#}"))).await;
+                    break;
+                }
+                if deliver(&mut s, ids, got, &mut seq, &tx).await.is_err() {
+                    break;
+                }
+                continue;
+            }
+        };
+        seq += 1;
+        if tx.send(event).await.is_err() {
+            break;
+        }
+    }
+    fetches.abort_all();
+    if let Some(a) = asking {
+        a.abort();
+    }
+}
+
+/// What one read request brings: each segment (id, then its body and size on the wire, or why
+/// not).
+pub type Items<B> = Vec<(u32, anyhow::Result<(B, u64)>)>;
+/// A finished read request: the ids asked for and what came of them.
+type Fetched<B> = (Vec<u32>, anyhow::Result<Items<B>>);
+
+/// Hands one finished read request's segments to the frame loop, one event each (one event
+/// for a request that failed as a whole). `Err` when the frame loop is gone.
+async fn deliver<B>(
+    s: &mut Schedule,
+    ids: Vec<u32>,
+    got: anyhow::Result<Items<B>>,
+    seq: &mut u64,
+    tx: &mpsc::Sender<Event<B>>,
+) -> Result<(), ()> {
+    let now = Instant::now();
+    let items = match got {
+        Ok(items) => items,
+        Err(e) => {
+            for id in ids {
+                s.finished(id, Err(()), now);
+            }
+            *seq += 1;
+            return tx
+                .send(Event::Failed(format!("{e:#}")))
+                .await
+                .map_err(|_| ());
+        }
+    };
+    let mut answered = HashSet::new();
+    for (id, item) in items {
+        answered.insert(id);
+        let event = match item {
+            Ok((body, bytes)) => {
+                let listed_at = s.finished(id, Ok(*seq + 1), now);
+                Event::Segment {
+                    id,
+                    body,
+                    bytes,
+                    listed_at,
+                }
+            }
+            Err(e) => {
+                s.finished(id, Err(()), now);
+                Event::Failed(format!("{e:#}"))
+            }
+        };
+        *seq += 1;
+        tx.send(event).await.map_err(|_| ())?;
+    }
+    for id in ids.into_iter().filter(|id| !answered.contains(id)) {
+        s.finished(id, Err(()), now);
+    }
+    Ok(())
+}
+/// A finished prefetch request: its number, when it was asked, and the answer.
+type Answered = (u64, Instant, anyhow::Result<PrefetchResponse>);
+
+/// Starts one `POST /v1/prefetch` for a frame state.
+fn ask_server<F: Fetcher>(
+    fetcher: &F,
+    s: &mut Schedule,
+    policy: Policy,
+    ask: Ask,
+) -> JoinHandle<Answered> {
+    let held: HashSet<u32> = ask.held.iter().copied().chain(s.pending()).collect();
+    let number = s.asked();
+    let req = PrefetchRequest {
+        version: PROTOCOL_VERSION,
+        observer: ask.observer,
+        policy,
+        held: portico_protocol::encode_held(held),
+    };
+    let f = fetcher.clone();
+    tokio::spawn(async move {
+        let at = Instant::now();
+        (number, at, f.prefetch(req).await)
+    })
+}

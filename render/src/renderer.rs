@@ -1,0 +1,438 @@
+//! The headless renderer: device, pipeline, one render pass per frame into offscreen targets,
+//! read-back (Funkhouser §3.3's render stage, timed so the cost model can be refitted).
+
+use crate::mesh::{GpuMesh, Uploader, upload_segment};
+use crate::pipeline::{
+    Globals, InstanceData, Targets, create_instance_buffer, create_pipeline, create_targets,
+    globals_layout,
+};
+use crate::{
+    Camera, Draw, FrameTiming, GpuImpostor, INITIAL_INSTANCES, RenderError, SKY_COLOR, textured,
+};
+use glam::{Mat4, Vec3};
+use portico_data::geometry::Aabb;
+use std::sync::{Arc, mpsc};
+use std::time::Instant;
+
+/// The headless renderer: device, offscreen targets, pipeline and per-frame buffers.
+#[derive(Debug)]
+pub struct Renderer {
+    pub(crate) _instance: wgpu::Instance,
+    pub(crate) info: wgpu::AdapterInfo,
+    pub(crate) device: wgpu::Device,
+    pub(crate) queue: wgpu::Queue,
+    pub(crate) pipeline: wgpu::RenderPipeline,
+    pub(crate) globals: wgpu::Buffer,
+    pub(crate) bind_group: wgpu::BindGroup,
+    pub(crate) instances: wgpu::Buffer,
+    pub(crate) targets: Targets,
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+    pub(crate) light_dir: Vec3,
+    pub(crate) ambient: f32,
+    pub(crate) has_frame: bool,
+    pub(crate) textured: Arc<textured::Textured>,
+    pub(crate) clear: wgpu::Color,
+}
+
+impl Renderer {
+    /// Creates a device on the default adapter (or the one `WGPU_BACKEND` / `WGPU_ADAPTER_NAME`
+    /// select) with offscreen targets of `width` x `height` pixels.
+    pub fn new(width: u32, height: u32) -> Result<Renderer, RenderError> {
+        let instance =
+            wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle().with_env());
+        let adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
+            &instance, None,
+        ))?;
+        let (device, queue) =
+            pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+                label: Some("portico"),
+                required_limits: adapter.limits(),
+                ..Default::default()
+            }))?;
+        let layout = globals_layout(&device);
+        let pipeline = create_pipeline(&device, &layout);
+        let globals = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("globals"),
+            size: std::mem::size_of::<Globals>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("globals"),
+            layout: &layout,
+            entries: &[wgpu::BindGroupEntry {
+                binding: 0,
+                resource: globals.as_entire_binding(),
+            }],
+        });
+        let instances = create_instance_buffer(&device, INITIAL_INSTANCES);
+        let targets = create_targets(&device, width, height)?;
+        let textured = Arc::new(textured::Textured::new(&device, &layout));
+        let info = adapter.get_info();
+        tracing::info!(adapter = %info.name, backend = ?info.backend, width, height, "renderer ready");
+        Ok(Renderer {
+            _instance: instance,
+            info,
+            device,
+            queue,
+            pipeline,
+            globals,
+            bind_group,
+            instances,
+            targets,
+            width,
+            height,
+            light_dir: Vec3::new(0.4, 0.8, 0.45).normalize(),
+            ambient: 0.35,
+            has_frame: false,
+            textured,
+            clear: SKY_COLOR,
+        })
+    }
+
+    /// Sets the colour frames are cleared to (default [`SKY_COLOR`]; a transparent one for
+    /// impostor captures).
+    pub fn set_clear(&mut self, color: wgpu::Color) {
+        self.clear = color;
+    }
+
+    /// Decodes an impostor atlas (PNG) and makes its textured box for `bounds`.
+    pub fn upload_impostor(
+        &self,
+        png: &[u8],
+        bounds: &Aabb,
+        tile: u32,
+    ) -> Result<GpuImpostor, RenderError> {
+        self.uploader().upload_impostor(png, bounds, tile)
+    }
+
+    /// A one-line description of the adapter, e.g. `Gl Cpu 'llvmpipe (LLVM 15.0.6, 256 bits)' ...`.
+    pub fn adapter_info(&self) -> String {
+        let i = &self.info;
+        format!(
+            "{:?} {:?} '{}' driver='{}' '{}'",
+            i.backend, i.device_type, i.name, i.driver, i.driver_info
+        )
+    }
+
+    /// Whether the adapter is a software rasteriser (llvmpipe, lavapipe, WARP).
+    pub fn is_cpu_adapter(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
+    /// Size of the offscreen targets in pixels.
+    pub fn size(&self) -> (u32, u32) {
+        (self.width, self.height)
+    }
+
+    /// Width over height of the targets.
+    pub fn aspect(&self) -> f32 {
+        self.width as f32 / self.height as f32
+    }
+
+    /// Recreates the offscreen targets at a new size (the last frame is discarded).
+    pub fn resize(&mut self, width: u32, height: u32) -> Result<(), RenderError> {
+        self.targets = create_targets(&self.device, width, height)?;
+        self.width = width;
+        self.height = height;
+        self.has_frame = false;
+        Ok(())
+    }
+
+    /// Sets the directional light (direction towards the light, world space; normalised here)
+    /// and the ambient fraction (clamped to 0..=1).
+    pub fn set_light(&mut self, towards_light: Vec3, ambient: f32) {
+        self.light_dir = towards_light.try_normalize().unwrap_or(Vec3::Z);
+        self.ambient = ambient.clamp(0.0, 1.0);
+    }
+
+    /// Parses a geometry segment and copies its vertex and index streams into GPU buffers.
+    pub fn upload(&self, segment_bytes: &[u8]) -> Result<GpuMesh, RenderError> {
+        upload_segment(&self.device, segment_bytes)
+    }
+
+    /// A handle that uploads on other threads (e.g. the IO stage) while this renderer draws.
+    pub fn uploader(&self) -> Uploader {
+        Uploader {
+            device: self.device.clone(),
+            queue: self.queue.clone(),
+            textured: self.textured.clone(),
+        }
+    }
+
+    /// Renders one frame from `camera` and waits until the GPU has finished it.
+    pub fn render(
+        &mut self,
+        camera: &Camera,
+        draws: &[Draw<'_>],
+    ) -> Result<FrameTiming, RenderError> {
+        self.render_view_proj(camera.view_proj(self.aspect()), draws)
+    }
+
+    /// Like [`Renderer::render_view_proj`], with textured boxes (cluster impostors) drawn too.
+    pub fn render_with_boxes_view_proj(
+        &mut self,
+        view_proj: Mat4,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+    ) -> Result<FrameTiming, RenderError> {
+        self.render_frame(view_proj, draws, boxes)
+    }
+
+    /// Like [`Renderer::render`], with textured boxes (cluster impostors) drawn too.
+    pub fn render_with_boxes(
+        &mut self,
+        camera: &Camera,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+    ) -> Result<FrameTiming, RenderError> {
+        self.render_frame(camera.view_proj(self.aspect()), draws, boxes)
+    }
+
+    /// Like [`Renderer::render`] with an explicit world-to-clip matrix (WebGPU clip space),
+    /// e.g. an orthographic bird's-eye view.
+    pub fn render_view_proj(
+        &mut self,
+        view_proj: Mat4,
+        draws: &[Draw<'_>],
+    ) -> Result<FrameTiming, RenderError> {
+        self.render_frame(view_proj, draws, &[])
+    }
+
+    fn render_frame(
+        &mut self,
+        view_proj: Mat4,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+    ) -> Result<FrameTiming, RenderError> {
+        let start = Instant::now();
+        let device = self.device.clone();
+        let mut timing = scoped(&device, || self.submit_frame(view_proj, draws, boxes))??;
+        timing.cpu_submit_s = start.elapsed().as_secs_f64();
+        self.device.poll(wgpu::PollType::wait_indefinitely())?;
+        timing.total_s = start.elapsed().as_secs_f64();
+        self.has_frame = true;
+        Ok(timing)
+    }
+
+    /// Copies the last rendered frame back to the CPU (sRGB-encoded RGBA8).
+    pub fn read_pixels(&mut self) -> Result<image::RgbaImage, RenderError> {
+        if !self.has_frame {
+            return Err(RenderError::NoFrame);
+        }
+        self.copy_to_readback();
+        let bytes = self.map_readback()?;
+        image::RgbaImage::from_raw(self.width, self.height, bytes)
+            .ok_or_else(|| RenderError::Readback("pixel buffer has the wrong size".into()))
+    }
+
+    /// Renders a frame and reads it back.
+    pub fn render_to_image(
+        &mut self,
+        camera: &Camera,
+        draws: &[Draw<'_>],
+    ) -> Result<(FrameTiming, image::RgbaImage), RenderError> {
+        let timing = self.render(camera, draws)?;
+        Ok((timing, self.read_pixels()?))
+    }
+
+    /// Uploads the frame's uniforms and instances, encodes the pass and submits it.
+    fn submit_frame(
+        &mut self,
+        view_proj: Mat4,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+    ) -> Result<FrameTiming, RenderError> {
+        self.write_globals(view_proj);
+        self.write_instances(draws)?;
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("frame"),
+            });
+        let timing = self.encode_pass(&mut encoder, draws, boxes);
+        self.queue.submit([encoder.finish()]);
+        Ok(timing)
+    }
+
+    fn write_globals(&self, view_proj: Mat4) {
+        let g = Globals {
+            view_proj: view_proj.to_cols_array_2d(),
+            light_dir: self.light_dir.extend(0.0).to_array(),
+            ambient: [self.ambient, 0.0, 0.0, 0.0],
+        };
+        self.queue
+            .write_buffer(&self.globals, 0, bytemuck::bytes_of(&g));
+    }
+
+    /// Writes one [`InstanceData`] per draw, growing the buffer to a power of two if needed.
+    fn write_instances(&mut self, draws: &[Draw<'_>]) -> Result<(), RenderError> {
+        let needed = draws.len() as u64;
+        let stride = std::mem::size_of::<InstanceData>() as u64;
+        if needed * stride > self.instances.size() {
+            let capacity = needed.next_power_of_two();
+            let limit = self.device.limits().max_buffer_size;
+            if capacity * stride > limit {
+                return Err(RenderError::TooLarge {
+                    size: capacity * stride,
+                    limit,
+                });
+            }
+            self.instances = create_instance_buffer(&self.device, capacity);
+        }
+        let data: Vec<InstanceData> = draws
+            .iter()
+            .map(|d| InstanceData {
+                model: d.transform.to_cols_array_2d(),
+                color: d.color,
+            })
+            .collect();
+        if !data.is_empty() {
+            self.queue
+                .write_buffer(&self.instances, 0, bytemuck::cast_slice(&data));
+        }
+        Ok(())
+    }
+
+    /// Records the render pass: clear, then one instanced draw per non-empty mesh, then the
+    /// textured boxes.
+    fn encode_pass(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+    ) -> FrameTiming {
+        let mut pass = self.begin_pass(encoder);
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.set_vertex_buffer(1, self.instances.slice(..));
+        let mut timing = FrameTiming::default();
+        let mut bound: Option<&GpuMesh> = None;
+        for (i, d) in (0u32..).zip(draws) {
+            if d.mesh.index_count == 0 {
+                continue;
+            }
+            if !bound.is_some_and(|b| std::ptr::eq(b, d.mesh)) {
+                pass.set_vertex_buffer(0, d.mesh.vertex.slice(..));
+                pass.set_index_buffer(d.mesh.index.slice(..), d.mesh.index_format);
+                bound = Some(d.mesh);
+            }
+            pass.draw_indexed(0..d.mesh.index_count, 0, i..i + 1);
+            timing.triangles += u64::from(d.mesh.triangles());
+            timing.vertices += u64::from(d.mesh.vertex_count);
+            timing.draws += 1;
+        }
+        self.textured.draw(&mut pass, &self.bind_group, boxes);
+        timing.triangles += 12 * boxes.len() as u64;
+        timing.vertices += 24 * boxes.len() as u64;
+        timing.draws += boxes.len() as u32;
+        timing
+    }
+
+    fn begin_pass<'e>(&self, encoder: &'e mut wgpu::CommandEncoder) -> wgpu::RenderPass<'e> {
+        encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("frame"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view: &self.targets.color_view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(self.clear),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &self.targets.depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(1.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        })
+    }
+
+    fn copy_to_readback(&self) {
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("readback"),
+            });
+        encoder.copy_texture_to_buffer(
+            wgpu::TexelCopyTextureInfo {
+                texture: &self.targets.color,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            wgpu::TexelCopyBufferInfo {
+                buffer: &self.targets.readback,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(self.targets.padded_row),
+                    rows_per_image: Some(self.height),
+                },
+            },
+            extent(self.width, self.height),
+        );
+        self.queue.submit([encoder.finish()]);
+    }
+
+    /// Maps the readback buffer and returns the pixels without the row padding.
+    fn map_readback(&self) -> Result<Vec<u8>, RenderError> {
+        let slice = self.targets.readback.slice(..);
+        let (tx, rx) = mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely())?;
+        rx.recv()
+            .map_err(|e| RenderError::Readback(e.to_string()))?
+            .map_err(|e| RenderError::Readback(e.to_string()))?;
+        let pixels = {
+            let mapped = slice
+                .get_mapped_range()
+                .map_err(|e| RenderError::Readback(e.to_string()))?;
+            strip_padding(&mapped, self.targets.padded_row, self.width * 4)
+        };
+        self.targets.readback.unmap();
+        Ok(pixels)
+    }
+}
+
+/// Runs `f` with out-of-memory and validation errors captured as [`RenderError::Gpu`] instead of
+/// reaching wgpu's default handler, which panics.
+pub(crate) fn scoped<T>(device: &wgpu::Device, f: impl FnOnce() -> T) -> Result<T, RenderError> {
+    let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+    let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
+    let out = f();
+    let errors = [
+        pollster::block_on(validation.pop()),
+        pollster::block_on(oom.pop()),
+    ];
+    match errors.into_iter().flatten().next() {
+        Some(e) => Err(RenderError::Gpu(e.to_string())),
+        None => Ok(out),
+    }
+}
+
+/// Copies the first `row` bytes of each `padded`-byte row.
+pub(crate) fn strip_padding(bytes: &[u8], padded: u32, row: u32) -> Vec<u8> {
+    bytes
+        .chunks(padded as usize)
+        .flat_map(|r| &r[..(row as usize).min(r.len())])
+        .copied()
+        .collect()
+}
+
+pub(crate) fn extent(width: u32, height: u32) -> wgpu::Extent3d {
+    wgpu::Extent3d {
+        width,
+        height,
+        depth_or_array_layers: 1,
+    }
+}
