@@ -16,8 +16,10 @@ pub mod polytope;
 pub mod portals;
 pub mod realtime;
 pub mod sightline;
+#[cfg(feature = "native")]
 pub mod stab;
 pub mod subdivide;
+#[cfg(feature = "native")]
 pub mod verify;
 
 use crate::geometry::Aabb;
@@ -323,6 +325,7 @@ pub struct CellStats {
     pub objects_visible: (f64, u64),
 }
 
+#[cfg(feature = "native")]
 /// The result of the whole precomputation.
 #[derive(Debug, Clone)]
 pub struct Precomputed {
@@ -339,6 +342,7 @@ pub struct Precomputed {
     pub visibility_seconds: f64,
 }
 
+#[cfg(feature = "native")]
 /// Runs subdivision, portals, incidence and visibility for a model's occluder boxes and object
 /// bounds. `on_cell` is called once per source cell done (for a progress bar).
 pub fn precompute(
@@ -367,6 +371,7 @@ pub fn precompute(
     }
 }
 
+#[cfg(feature = "native")]
 /// The part of `bounds` the model's bulk occupies ([`crate::bulk`]); `bounds` itself when the
 /// model has no strays.
 fn bulk_of(bounds: &Aabb, objects: &[Aabb]) -> Aabb {
@@ -387,6 +392,7 @@ fn bulk_of(bounds: &Aabb, objects: &[Aabb]) -> Aabb {
     }
 }
 
+#[cfg(feature = "native")]
 fn stats(graph: &CellGraph, stabs: &[StabList], occluder_boxes: usize) -> CellStats {
     let live: Vec<usize> = (0..graph.cells.len())
         .filter(|&i| graph.cells[i].live)

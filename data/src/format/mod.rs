@@ -15,7 +15,9 @@
 //! ([`reader`]), so a truncated, corrupt or foreign file is a clear error, never a panic.
 
 mod header;
+#[cfg(feature = "native")]
 pub mod reader;
+#[cfg(feature = "native")]
 pub mod writer;
 
 pub use header::{CellIndex, Header, InstanceRecord, LodRecord, ObjectRecord};
