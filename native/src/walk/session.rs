@@ -1,0 +1,173 @@
+//! The connected walkthrough client (Funkhouser Ch. 6): [`Session`] loads the model's
+//! manifest and cell graph, starts the renderer and the IO stage, and draws one frame per
+//! observer it is given, whether a path or a person at a window drives it.
+
+use super::walker::Walker;
+use super::{Model, WalkConfig, WalkSummary};
+use crate::io::{Catalogue, IoConfig, IoStage};
+use crate::net::Remote;
+use anyhow::{Context, Result};
+use glam::Vec3;
+use portico_client::elision::Algorithm;
+use portico_client::stats::FrameRow;
+use portico_protocol::{Observer, Policy};
+use portico_render::Renderer;
+use std::time::Instant;
+
+/// A connected client drawing one frame per observer it is given: the walk's frame loop
+/// without the path, so that a path ([`walk`](super::walk)) or a person at a window drives it.
+/// Dropping it stops the IO stage.
+pub struct Session<'a> {
+    walker: Walker<'a>,
+    renderer: Renderer,
+    io: Option<IoStage>,
+    rows: Vec<FrameRow>,
+    start: Instant,
+}
+
+impl<'a> Session<'a> {
+    /// Loads the manifest and cell graph, starts the renderer (calibrating the cost model)
+    /// and the IO stage. `cfg.path` is only used by [`Session::path_observer`].
+    pub fn open(cfg: &'a WalkConfig) -> Result<Session<'a>> {
+        let start = Instant::now();
+        let remote = Remote::new(&cfg.server, cfg.token.clone())?;
+        let model = load_model(&remote)?;
+        let mut renderer =
+            Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
+        let cost = portico_render::calibrate(&mut renderer)?;
+        let policy = Policy {
+            impostors: cfg.elision == Algorithm::Impostors,
+            cache_bytes: cfg.cache_bytes,
+            screen: [cfg.size.0, cfg.size.1],
+            frame_time_s: cfg.budget_s as f32,
+            ..cfg.policy
+        };
+        let io = IoStage::start(
+            remote,
+            renderer.uploader(),
+            model.catalogue.clone(),
+            IoConfig {
+                policy,
+                parallel: 8,
+            },
+        )?;
+        Ok(Session {
+            walker: Walker::new(cfg, model, cost),
+            renderer,
+            io: Some(io),
+            rows: Vec::new(),
+            start,
+        })
+    }
+
+    /// The observer on the configured path at `t` seconds.
+    pub fn path_observer(&self, t: f64) -> Observer {
+        let dt = self.walker.cfg.budget_s.max(1e-3);
+        let (eye, dir) = self.walker.cfg.path.sample(t as f32);
+        let (next, _) = self.walker.cfg.path.sample((t + dt) as f32);
+        self.observer(eye, dir, (next - eye) / dt as f32)
+    }
+
+    /// An observer at `eye` looking along `dir`, moving at `velocity`, with this client's field
+    /// of view and announced speeds.
+    pub fn observer(&self, eye: Vec3, dir: Vec3, velocity: Vec3) -> Observer {
+        self.walker.observer(eye, dir, velocity)
+    }
+
+    /// Takes what arrived, then visibility → elision → render for `obs` (shown at `t` seconds,
+    /// the time of the frame's row), then tells the IO stage where the observer is. Never waits
+    /// for the network.
+    pub fn frame(&mut self, t: f64, obs: &Observer) -> Result<&FrameRow> {
+        let t0 = Instant::now();
+        let frame = self.rows.len() as u64;
+        let io = self.io.as_mut().context("the session is closed")?;
+        let mut row = FrameRow {
+            frame,
+            t,
+            ..FrameRow::default()
+        };
+        self.walker.take_arrivals(io, &mut row);
+        self.walker.frame(&mut self.renderer, obs, &mut row)?;
+        row.frame_s = t0.elapsed().as_secs_f64();
+        self.walker.last_frame_s = Some(row.frame_s);
+        self.walker.online.observe(row.predicted_s, row.render_s);
+        self.walker.publish(io, *obs);
+        self.rows.push(row);
+        Ok(&self.rows[self.rows.len() - 1])
+    }
+
+    /// The last frame's pixels.
+    pub fn image(&mut self) -> Result<image::RgbaImage> {
+        Ok(self.renderer.read_pixels()?)
+    }
+
+    /// Saves the last frame as `OUT/frames/frame_NNNNN.png` (when there is an output directory).
+    pub fn save_png(&mut self, frame: u64) -> Result<()> {
+        self.walker.save_png(&mut self.renderer, frame)
+    }
+
+    /// Stops the IO stage and returns the summary (and writes frames.csv and summary.json when
+    /// there is an output directory).
+    pub fn finish(mut self) -> Result<WalkSummary> {
+        if let Some(io) = self.io.take() {
+            io.stop();
+        }
+        let wall_s = self.start.elapsed().as_secs_f64();
+        self.walker.finish(&self.renderer, &self.rows, wall_s)
+    }
+}
+
+impl Drop for Session<'_> {
+    fn drop(&mut self) {
+        if let Some(io) = self.io.take() {
+            io.stop();
+        }
+    }
+}
+
+fn load_model(remote: &Remote) -> Result<Model> {
+    let (m, graph) = crate::net::model_blocking(remote)?;
+    let bounds: Vec<_> = m.header.instances.iter().map(|i| i.bounds).collect();
+    // Indices from the manifest are used as they are below: check them once.
+    if let Some(h) = &m.header.hierarchy {
+        h.check(&bounds)
+            .map_err(|e| anyhow::anyhow!("{}: the manifest's hierarchy: {e}", remote.base()))?;
+    }
+    let model_triangles = m
+        .header
+        .instances
+        .iter()
+        .map(|i| {
+            m.header
+                .lods_of(i)
+                .first()
+                .map_or(0, |l| l.triangles as u64)
+        })
+        .sum();
+    let stabs = m
+        .header
+        .cells
+        .as_ref()
+        .map(|c| c.stab_segments.iter().copied().collect())
+        .unwrap_or_default();
+    let textures = m
+        .header
+        .hierarchy
+        .iter()
+        .flat_map(|h| &h.nodes)
+        .filter(|n| n.texture != u32::MAX)
+        .map(|n| (n.texture, (n.bounds, n.tile)))
+        .collect();
+    Ok(Model {
+        catalogue: Catalogue {
+            segments: m.segments,
+            stabs,
+            textures,
+        },
+        header: m.header,
+        graph,
+        bounds,
+        database_id: m.database_id,
+        model_triangles,
+    })
+}

@@ -1,0 +1,340 @@
+//! The frame loop's state (Funkhouser Ch. 6): arrivals into the byte-budgeted cache, the frame
+//! decision over resident LODs and its draws, the observer and held set published to the IO
+//! stage (§5.2.4), and the walk's summary. Also the colour and textured stand-in boxes of
+//! Maciel's cluster traversal.
+
+use super::{Model, Resident, WalkConfig, WalkSummary};
+use crate::drive::{Ask, Event};
+use crate::io::{IoStage, Payload};
+use anyhow::{Context, Result};
+use glam::{Mat4, Vec3};
+use portico_client::cache::ObjectCache;
+use portico_client::cluster::Stand;
+use portico_client::cost::{CostModel, OnlineCost};
+use portico_client::frame::{Decider, Scene};
+use portico_client::stats::{FrameRow, Series, write_csv};
+use portico_client::view::{self, Viewpoint};
+use portico_data::cells::StabList;
+use portico_data::geometry::encode_geometry;
+use portico_data::hierarchy::{Hierarchy, colour_box};
+use portico_protocol::Observer;
+use portico_render::{Draw, GpuImpostor, GpuMesh, Renderer};
+use std::sync::Arc;
+
+/// The frame loop's state.
+pub(super) struct Walker<'a> {
+    pub(super) cfg: &'a WalkConfig,
+    model: Model,
+    cache: ObjectCache<Resident>,
+    decider: Decider,
+    cost: CostModel,
+    pub(super) online: OnlineCost,
+    consumed: u64,
+    colour_boxes: std::collections::HashMap<u32, GpuMesh>,
+    /// Segments larger than the whole cache: reported as held so no answer lists them again.
+    too_big: std::collections::HashSet<u32>,
+    latencies: Vec<f64>,
+    failures: u64,
+    database_changed: bool,
+    segments_read: u64,
+    bytes_read: u64,
+    pub(super) last_frame_s: Option<f64>,
+}
+
+impl<'a> Walker<'a> {
+    pub(super) fn new(cfg: &'a WalkConfig, model: Model, cost: CostModel) -> Walker<'a> {
+        Walker {
+            cfg,
+            model,
+            cache: ObjectCache::new(cfg.cache_bytes),
+            decider: Decider::new(
+                cfg.elision,
+                cfg.budget_s,
+                Some(cfg.policy.size_threshold_px),
+            ),
+            cost,
+            online: OnlineCost::default(),
+            consumed: 0,
+            colour_boxes: std::collections::HashMap::new(),
+            too_big: std::collections::HashSet::new(),
+            latencies: Vec::new(),
+            failures: 0,
+            database_changed: false,
+            segments_read: 0,
+            bytes_read: 0,
+            last_frame_s: None,
+        }
+    }
+
+    /// Moves everything the IO stage delivered into the cache (never above its budget).
+    pub(super) fn take_arrivals(&mut self, io: &mut IoStage, row: &mut FrameRow) {
+        while let Ok(a) = io.arrivals.try_recv() {
+            self.consumed += 1;
+            match a {
+                Event::Segment {
+                    id,
+                    body,
+                    bytes,
+                    listed_at,
+                } => {
+                    row.read_segments += 1;
+                    row.read_bytes += bytes;
+                    self.segments_read += 1;
+                    self.bytes_read += bytes;
+                    self.latencies.push(listed_at.elapsed().as_secs_f64());
+                    // An atlas is charged what it holds on the GPU, not its PNG size.
+                    let (value, charge) = match body {
+                        Payload::Mesh(m) => (Resident::Mesh(m), bytes),
+                        Payload::Stab(s) => (Resident::Stab(s), bytes),
+                        Payload::Impostor(i) => {
+                            let gpu = i.gpu_bytes();
+                            (Resident::Impostor(i), bytes.max(gpu))
+                        }
+                    };
+                    match self.cache.insert(id, value, charge) {
+                        Ok(released) => row.released_segments += released.len() as u32,
+                        // Larger than the whole cache: never ask for it again.
+                        Err(_) => {
+                            self.too_big.insert(id);
+                        }
+                    }
+                }
+                Event::Answer(resp) => resp.evict.iter().for_each(|&id| self.cache.demote(id)),
+                Event::Failed(e) => {
+                    self.failures += 1;
+                    tracing::warn!("io: {e}");
+                }
+                Event::Stale(e) => {
+                    self.failures += 1;
+                    self.database_changed = true;
+                    tracing::warn!("io stopped: {e}");
+                }
+            }
+        }
+    }
+
+    pub(super) fn observer(&self, eye: Vec3, dir: Vec3, velocity: Vec3) -> Observer {
+        let aspect = self.cfg.size.0 as f32 / self.cfg.size.1.max(1) as f32;
+        view::observer(
+            eye,
+            dir,
+            velocity,
+            self.cfg.fovy,
+            aspect,
+            self.cfg.max_speed,
+            self.cfg.max_turn,
+        )
+    }
+
+    /// The frame decision ([`portico_client::frame`]), then its draws on the GPU.
+    pub(super) fn frame(
+        &mut self,
+        r: &mut Renderer,
+        obs: &Observer,
+        row: &mut FrameRow,
+    ) -> Result<()> {
+        let view = Viewpoint::of(
+            obs,
+            self.cfg.size,
+            view::far_plane(&self.model.header.bounds),
+        );
+        let scene = Scene {
+            header: &self.model.header,
+            graph: self.model.graph.as_ref(),
+            bounds: &self.model.bounds,
+        };
+        let cost = self.online.apply(&self.cost);
+        let d = self.decider.decide(
+            &scene,
+            &view,
+            &Cached(&self.cache, &scene),
+            &cost,
+            self.last_frame_s,
+        );
+        row.visibility_s = d.visibility_s;
+        row.visible_cells = d.visible.cells;
+        row.visible_objects = d.visible.objects.len() as u32;
+        row.visibility_fallback = d.visible.fallback;
+        row.elision_s = d.elision_s;
+        row.predicted_s = d.frame.predicted_s;
+        row.lods_skipped = d.frame.lods_skipped;
+        row.objects_skipped = d.frame.objects_skipped;
+
+        if let Some(h) = &self.model.header.hierarchy {
+            make_colour_boxes(&mut self.colour_boxes, h, &d.boxes, r);
+        }
+        let header = &self.model.header;
+        let cache = &self.cache;
+        let mut draws = Vec::with_capacity(d.drawn.len() + d.boxes.len());
+        for o in &d.drawn {
+            if let Some(Resident::Mesh(mesh)) = cache.get(o.segment) {
+                let inst = &header.instances[o.instance as usize];
+                let color = header
+                    .materials
+                    .get(inst.material as usize)
+                    .map_or([1.0; 4], |m| m.base_color);
+                draws.push(Draw {
+                    mesh,
+                    transform: Mat4::from_cols_array(&inst.transform),
+                    color,
+                });
+            }
+        }
+        let textured = match &header.hierarchy {
+            Some(h) => stand_ins(cache, &self.colour_boxes, h, &d.boxes, &mut draws),
+            None => Vec::new(),
+        };
+        let timing = r.render_with_boxes(&view.camera, &draws, &textured)?;
+        row.render_s = timing.total_s;
+        row.drawn_objects = timing.draws;
+        row.drawn_triangles = timing.triangles;
+        for &s in &d.touched {
+            self.cache.touch(s);
+        }
+        row.resident_segments = self.cache.len() as u32;
+        row.resident_bytes = self.cache.bytes();
+        Ok(())
+    }
+
+    pub(super) fn publish(&self, io: &IoStage, observer: Observer) {
+        let _ = io.state.send(Some(Ask {
+            observer,
+            held: self
+                .cache
+                .ids()
+                .chain(self.too_big.iter().copied())
+                .collect(),
+            consumed: self.consumed,
+            wants: None,
+            at: std::time::Instant::now(),
+        }));
+    }
+
+    pub(super) fn save_png(&self, r: &mut Renderer, frame: u64) -> Result<()> {
+        let Some(out) = &self.cfg.out else {
+            return Ok(());
+        };
+        let img = r.read_pixels()?;
+        let p = out.join("frames").join(format!("frame_{frame:05}.png"));
+        img.save(&p)
+            .with_context(|| format!("writing {}", p.display()))
+    }
+
+    pub(super) fn finish(
+        &self,
+        r: &Renderer,
+        rows: &[FrameRow],
+        wall_s: f64,
+    ) -> Result<WalkSummary> {
+        let col =
+            |f: &dyn Fn(&FrameRow) -> f64| Series::of(&rows.iter().map(f).collect::<Vec<_>>());
+        let drawn = col(&|r| r.drawn_triangles as f64);
+        let s = WalkSummary {
+            adapter: r.adapter_info(),
+            server: self.cfg.server.clone(),
+            model: self.model.header.name.clone(),
+            database_id: self.model.database_id.clone(),
+            path: self.cfg.path.kind.clone(),
+            path_hash: format!("{:016x}", self.cfg.path.hash()),
+            elision: self.cfg.elision.to_string(),
+            budget_s: self.cfg.budget_s,
+            frames: rows.len() as u64,
+            frame_s: col(&|r| r.frame_s),
+            render_s: col(&|r| r.render_s),
+            frames_over_budget: rows
+                .iter()
+                .filter(|r| r.frame_s > self.cfg.budget_s)
+                .count() as u64,
+            lods_skipped: col(&|r| r.lods_skipped as f64),
+            objects_skipped: col(&|r| r.objects_skipped as f64),
+            visible_objects: col(&|r| r.visible_objects as f64),
+            drawn_triangles: drawn,
+            model_triangles: self.model.model_triangles,
+            drawn_fraction: drawn.mean / self.model.model_triangles.max(1) as f64,
+            visibility_fallback_frames: rows.iter().filter(|r| r.visibility_fallback).count()
+                as u64,
+            cache_budget: self.cache.budget(),
+            cache_peak_bytes: self.cache.peak_bytes(),
+            evictions: self.cache.evictions(),
+            segments_read: self.segments_read,
+            bytes_read: self.bytes_read,
+            fetch_latency_s: Series::of(&self.latencies),
+            io_failures: self.failures,
+            database_changed: self.database_changed,
+            cost_model: self.cost,
+            cost_factor: self.online.factor(),
+            wall_s,
+        };
+        if let Some(out) = &self.cfg.out {
+            write_csv(&out.join("frames.csv"), rows).context("writing frames.csv")?;
+            let json = serde_json::to_vec_pretty(&s)?;
+            std::fs::write(out.join("summary.json"), json).context("writing summary.json")?;
+        }
+        Ok(s)
+    }
+}
+
+/// What the walker's cache holds, as the frame decision asks it.
+struct Cached<'a>(&'a ObjectCache<Resident>, &'a Scene<'a>);
+
+impl portico_client::frame::Resident for Cached<'_> {
+    fn has(&self, id: u32) -> bool {
+        self.0.contains(id)
+    }
+
+    fn stab(&self, cell: u32) -> Option<Arc<StabList>> {
+        match self.0.get(self.1.stab_segment(cell)?) {
+            Some(Resident::Stab(l)) => Some(l.clone()),
+            _ => None,
+        }
+    }
+}
+
+/// Makes the average-colour boxes of `boxes` that do not exist yet (their colours are in the
+/// header: nothing to fetch) and frees the others, so they never add up outside the cache.
+fn make_colour_boxes(
+    made: &mut std::collections::HashMap<u32, GpuMesh>,
+    h: &Hierarchy,
+    boxes: &[(u32, Stand)],
+    r: &Renderer,
+) {
+    let wanted: std::collections::HashSet<u32> = boxes.iter().map(|b| b.0).collect();
+    made.retain(|n, _| wanted.contains(n));
+    for &(n, _) in boxes {
+        if let std::collections::hash_map::Entry::Vacant(e) = made.entry(n) {
+            let node = &h.nodes[n as usize];
+            let mesh = encode_geometry(&colour_box(&node.bounds, &node.face_colors));
+            if let Ok(gpu) = r.upload(&mesh) {
+                e.insert(gpu);
+            }
+        }
+    }
+}
+
+/// Adds the average-colour boxes to `draws` and returns the resident textured boxes; the
+/// textures used count as touched (§5.2.3).
+fn stand_ins<'c>(
+    cache: &'c ObjectCache<Resident>,
+    colour: &'c std::collections::HashMap<u32, GpuMesh>,
+    h: &Hierarchy,
+    boxes: &[(u32, Stand)],
+    draws: &mut Vec<Draw<'c>>,
+) -> Vec<&'c GpuImpostor> {
+    let mut textured = Vec::new();
+    for &(n, stand) in boxes {
+        let t = h.nodes[n as usize].texture;
+        match (stand, cache.get(t)) {
+            (Stand::Textured, Some(Resident::Impostor(i))) => textured.push(i),
+            _ => {
+                if let Some(mesh) = colour.get(&n) {
+                    draws.push(Draw {
+                        mesh,
+                        transform: Mat4::IDENTITY,
+                        color: [1.0; 4],
+                    });
+                }
+            }
+        }
+    }
+    textured
+}
