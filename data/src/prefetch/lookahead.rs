@@ -5,12 +5,18 @@
 //! cell-to-object visibility (object granularity) or every object incident upon the visible cell
 //! (cell granularity). Each object is stored only up to the LOD a static size threshold allows
 //! at the nearest point of the observer range, so near objects get finer LODs than far ones
-//! (Fig. 5.8).
+//! (Fig. 5.8). The search stops once the lookahead claims more than the client's cache holds
+//! (condition 2 of §5.2.2), but never before everything visible from the eye cell is in.
 
-use super::range::{ObserverRange, distance_to_box};
+use super::range::{self, ObserverRange, distance_to_box};
+use super::{Budget, Candidate, Prefetcher, need};
+use crate::cells::CellGraph;
+use crate::cells::realtime::{Frustum, eye_to_cell, eye_to_object};
+use crate::error::Result;
 use crate::format::LodRecord;
 use crate::geometry::Aabb;
-use portico_protocol::Policy;
+use portico_protocol::{Granularity, NeedItem, NeedKind, Observer, Policy};
+use std::collections::HashSet;
 
 /// Projected screen area (pixels) of a box seen from `distance` metres: the area of its
 /// bounding sphere's disc, capped at the screen.
@@ -45,4 +51,171 @@ pub fn max_lod_in_range(
     let nearest = (distance_to_box(range.eye, bounds) - range.radius).max(0.0);
     let px = projected_pixels(bounds, nearest, policy, half_fov_y);
     max_lod(lods, px, policy.size_threshold_px.max(0.0))
+}
+
+impl Prefetcher {
+    /// Range cells → visible cells → objects → LOD candidates.
+    #[allow(clippy::type_complexity)]
+    pub(super) fn lookahead_with_cells(
+        &self,
+        graph: &CellGraph,
+        range: &ObserverRange,
+        obs: &Observer,
+        policy: &Policy,
+        budget: &Budget,
+    ) -> Result<(u32, Vec<NeedItem>, Vec<Candidate>, u32)> {
+        let ranged = range::range_cells(graph, range, policy.range_cull);
+        budget.check()?;
+        let now = self.visible_now(graph, obs)?;
+        let mut stab_items = Vec::new();
+        let mut seen_obj = vec![false; self.db.header().instances.len()];
+        let mut seen_cell = vec![false; graph.cells.len()];
+        let mut cands = Vec::new();
+        let mut claimed = 0u64;
+        let mut lookahead_cells = 0u32;
+        'outer: for &(cell, frames) in &ranged {
+            if let Some(seg) = self.stab_segment(cell) {
+                stab_items.push(need(
+                    seg,
+                    NeedKind::Stab,
+                    0,
+                    self.segment_bytes(seg),
+                    frames,
+                ));
+            }
+            let stab = self.stab(cell)?;
+            for entry in &stab.entries {
+                budget.check()?;
+                if !range.lookahead_keeps(policy.lookahead_cull, &entry.region) {
+                    continue;
+                }
+                if !std::mem::replace(&mut seen_cell[entry.cell as usize], true) {
+                    lookahead_cells += 1;
+                }
+                let objects = match policy.granularity {
+                    Granularity::Object => entry.objects.clone(),
+                    Granularity::Cell => {
+                        let s = self.stab(entry.cell)?;
+                        s.inside.iter().chain(&s.partial).copied().collect()
+                    }
+                };
+                for o in objects {
+                    if std::mem::replace(&mut seen_obj[o as usize], true) {
+                        continue;
+                    }
+                    let first = cands.len();
+                    claimed += self.add_object(o, frames, range, obs, policy, &mut cands);
+                    if now.contains(&o) {
+                        cands[first..].iter_mut().for_each(|c| c.now = true);
+                    }
+                }
+                // §5.2.2 condition 2: memory is claimed, and everything visible now is in.
+                if frames > 0 && claimed > policy.cache_bytes {
+                    break 'outer;
+                }
+            }
+        }
+        let stab_items = if policy.impostors {
+            self.with_textures(stab_items, &cands, glam::Vec3::from(obs.eye))
+        } else {
+            stab_items
+        };
+        Ok((ranged.len() as u32, stab_items, cands, lookahead_cells))
+    }
+
+    /// The objects in the observer's view right now: eye-to-object visibility from the eye
+    /// cell's stab list through the portals (§4.1.2), as the client culls. Empty outside every
+    /// live cell.
+    fn visible_now(&self, graph: &CellGraph, obs: &Observer) -> Result<HashSet<u32>> {
+        let eye = glam::Vec3::from(obs.eye);
+        let Some(cell) = graph.locate(eye).filter(|&c| graph.cells[c as usize].live) else {
+            return Ok(HashSet::new());
+        };
+        let dir = glam::Vec3::from(obs.dir)
+            .try_normalize()
+            .unwrap_or(glam::Vec3::NEG_Z);
+        let mut up = glam::Vec3::from(obs.up)
+            .try_normalize()
+            .unwrap_or(glam::Vec3::Y);
+        if up.cross(dir).length_squared() < 1e-6 {
+            up = if dir.y.abs() < 0.9 {
+                glam::Vec3::Y
+            } else {
+                glam::Vec3::X
+            };
+        }
+        let (hx, hy) = (
+            obs.half_fov_x.clamp(0.01, 1.55),
+            obs.half_fov_y.clamp(0.01, 1.55),
+        );
+        let view = Frustum::new(eye, dir, up, hx, hy);
+        let reached = eye_to_cell(graph, &view);
+        let stab = self.stab(cell)?;
+        Ok(eye_to_object(&reached, &stab, &self.bounds)
+            .into_iter()
+            .collect())
+    }
+
+    /// Without cells every object is a lookahead object, needed when the observer can reach it.
+    pub(super) fn lookahead_without_cells(
+        &self,
+        range: &ObserverRange,
+        obs: &Observer,
+        policy: &Policy,
+        budget: &Budget,
+    ) -> Result<Vec<Candidate>> {
+        let mut cands = Vec::new();
+        let mut claimed = 0u64;
+        let mut order: Vec<(u32, u32)> = self
+            .db
+            .header()
+            .instances
+            .iter()
+            .enumerate()
+            .map(|(i, inst)| (range.frames_to(&inst.bounds), i as u32))
+            .collect();
+        order.sort_unstable();
+        for (i, (frames, o)) in order.into_iter().enumerate() {
+            if i % 1024 == 0 {
+                budget.check()?;
+            }
+            if frames > 0 && claimed > policy.cache_bytes {
+                break;
+            }
+            claimed += self.add_object(o, frames.min(range.depth), range, obs, policy, &mut cands);
+        }
+        Ok(cands)
+    }
+
+    /// Adds the LODs of one object from the coarsest up to its maximum; returns their bytes.
+    fn add_object(
+        &self,
+        o: u32,
+        frames: u32,
+        range: &ObserverRange,
+        obs: &Observer,
+        policy: &Policy,
+        cands: &mut Vec<Candidate>,
+    ) -> u64 {
+        let header = self.db.header();
+        let Some(inst) = header.instances.get(o as usize) else {
+            return 0;
+        };
+        let lods = header.lods_of(inst);
+        let max = max_lod_in_range(lods, &inst.bounds, range, policy, obs.half_fov_y);
+        let mut bytes = 0;
+        for (i, l) in lods.iter().enumerate().skip(max) {
+            let b = self.segment_bytes(l.segment);
+            bytes += b;
+            cands.push(Candidate {
+                now: false,
+                object: o,
+                level: (lods.len() - 1 - i) as u32,
+                frames,
+                seq: cands.len() as u32,
+                item: need(l.segment, NeedKind::Geometry, i as u8, b, frames),
+            });
+        }
+        bytes
+    }
 }
