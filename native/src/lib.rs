@@ -1,7 +1,7 @@
 //! The native Portico client around the platform-free core (`portico_client`): the HTTP side of
 //! the protocol ([`net`]), the IO thread that reads, checks, decodes and uploads segments
 //! ([`io`], driving the core's read schedule with [`drive`]), the headless walk ([`walk`]) and
-//! the interactive window ([`window`], feature `window`).
+//! the interactive window (`window`, feature `window`).
 
 pub mod drive;
 pub mod io;

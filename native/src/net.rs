@@ -107,6 +107,17 @@ impl Remote {
             .map_err(|e| anyhow::anyhow!("{}: cell graph {e}", self.base))
     }
 
+    /// What every client needs before its first frame: the manifest and, when the model has
+    /// cells, the cell graph.
+    pub async fn model(&self) -> Result<(Manifest<Header>, Option<CellGraph>)> {
+        let m = self.manifest().await?;
+        let graph = match m.header.cells {
+            Some(_) => Some(self.cells().await?),
+            None => None,
+        };
+        Ok((m, graph))
+    }
+
     /// `GET /v1/db/{database_id}/segments/{id}`.
     pub async fn segment(&self, id: u32) -> Result<Bytes> {
         let url = format!("{}/segments/{id}", self.segments_base());
@@ -151,10 +162,11 @@ impl Remote {
     }
 }
 
-/// Fetches a server's cell graph from synchronous code (e.g. to make a path before a walk).
-pub fn cells_blocking(remote: &Remote) -> Result<CellGraph> {
+/// [`Remote::model`] from synchronous code (e.g. to make a path before a walk), on a
+/// current-thread runtime of its own.
+pub fn model_blocking(remote: &Remote) -> Result<(Manifest<Header>, Option<CellGraph>)> {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
-    rt.block_on(remote.cells())
+    rt.block_on(remote.model())
 }

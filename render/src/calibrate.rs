@@ -33,7 +33,7 @@ impl Renderer {
             .collect()
     }
 
-    /// Times frames of [`FILL_LAYERS`] overlapping screen-aligned quads, each covering the given
+    /// Times frames of four (`FILL_LAYERS`) overlapping screen-aligned quads, each covering the given
     /// fraction of the screen. Returns `(pixels written, seconds)` per coverage, for fitting
     /// `C3·pixels` (§4.2.3).
     pub fn sample_fill(&mut self, coverage: &[f32]) -> Result<Vec<(f64, f64)>, RenderError> {

@@ -1,4 +1,4 @@
-//! Headless wgpu renderer of the walkthrough client (DESIGN §5).
+//! Headless wgpu renderer of the walkthrough client.
 //!
 //! Funkhouser's walkthrough system (§3.3) ends its pipeline with a render stage that draws, every
 //! frame, the objects and levels of detail chosen by the detail-elision stage, and measures how

@@ -48,7 +48,7 @@ impl GpuMesh {
 }
 
 /// A cloneable, thread-safe handle for uploading geometry segments to the renderer's device from
-/// another thread (DESIGN §5: the IO → GPU-upload stage), while the render thread draws.
+/// another thread (the IO → GPU-upload stage), while the render thread draws.
 #[derive(Debug, Clone)]
 pub struct Uploader {
     pub(crate) device: wgpu::Device,
@@ -57,12 +57,12 @@ pub struct Uploader {
 }
 
 impl Uploader {
-    /// Same as [`Renderer::upload`].
+    /// Same as [`crate::Renderer::upload`].
     pub fn upload(&self, segment_bytes: &[u8]) -> Result<GpuMesh, RenderError> {
         upload_segment(&self.device, segment_bytes)
     }
 
-    /// Same as [`Renderer::upload_impostor`].
+    /// Same as [`crate::Renderer::upload_impostor`].
     pub fn upload_impostor(
         &self,
         png: &[u8],

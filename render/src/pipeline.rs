@@ -137,17 +137,31 @@ pub(crate) fn create_pipeline(
         immediate_size: 0,
     });
     let buffers = vertex_layouts();
+    opaque_pipeline(device, "walkthrough", &layout, &shader, &buffers, None)
+}
+
+/// A pipeline of depth-tested opaque triangles from `shader`'s `vs_main` and `fs_main` into the
+/// one colour target (the walkthrough's and the impostor boxes' alike); `cull_mode` as the
+/// geometry's winding allows.
+pub(crate) fn opaque_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::PipelineLayout,
+    shader: &wgpu::ShaderModule,
+    buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+    cull_mode: Option<wgpu::Face>,
+) -> wgpu::RenderPipeline {
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some("walkthrough"),
-        layout: Some(&layout),
+        label: Some(label),
+        layout: Some(layout),
         vertex: wgpu::VertexState {
-            module: &shader,
+            module: shader,
             entry_point: Some("vs_main"),
             compilation_options: Default::default(),
-            buffers: &buffers,
+            buffers,
         },
         primitive: wgpu::PrimitiveState {
-            cull_mode: None,
+            cull_mode,
             ..Default::default()
         },
         depth_stencil: Some(wgpu::DepthStencilState {
@@ -159,7 +173,7 @@ pub(crate) fn create_pipeline(
         }),
         multisample: Default::default(),
         fragment: Some(wgpu::FragmentState {
-            module: &shader,
+            module: shader,
             entry_point: Some("fs_main"),
             compilation_options: Default::default(),
             targets: &[Some(COLOR_FORMAT.into())],

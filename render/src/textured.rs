@@ -3,7 +3,8 @@
 //! 24 vertices (four per face, so each face maps its own tile of the atlas, exactly where the
 //! build-time capture put it: [`portico_data::hierarchy::face_uv`]) and 36 indices.
 
-use super::{COLOR_FORMAT, DEPTH_FORMAT, RenderError, extent};
+use super::pipeline::opaque_pipeline;
+use super::{RenderError, extent};
 use bytemuck::{Pod, Zeroable};
 use portico_data::geometry::Aabb;
 use portico_data::hierarchy::{FACES, face_frame, face_uv};
@@ -81,42 +82,21 @@ impl Textured {
         });
         const ATTRIBUTES: [wgpu::VertexAttribute; 2] =
             wgpu::vertex_attr_array![0 => Float32x3, 1 => Float32x2];
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("impostors"),
-            layout: Some(&pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &shader,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: std::mem::size_of::<BoxVertex>() as u64,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &ATTRIBUTES,
-                })],
-            },
-            // Faces wind counter-clockwise seen from outside: through a transparent texel of a
-            // near face one sees what is behind the box, not the far face's mirrored inside.
-            primitive: wgpu::PrimitiveState {
-                cull_mode: Some(wgpu::Face::Back),
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Less),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &shader,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(COLOR_FORMAT.into())],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let buffers = [Some(wgpu::VertexBufferLayout {
+            array_stride: std::mem::size_of::<BoxVertex>() as u64,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &ATTRIBUTES,
+        })];
+        // Faces wind counter-clockwise seen from outside: through a transparent texel of a
+        // near face one sees what is behind the box, not the far face's mirrored inside.
+        let pipeline = opaque_pipeline(
+            device,
+            "impostors",
+            &pipeline_layout,
+            &shader,
+            &buffers,
+            Some(wgpu::Face::Back),
+        );
         Textured {
             pipeline,
             layout,

@@ -60,20 +60,11 @@ impl Scene {
 
     /// The scene a server serves (its manifest, and its cells when it has them).
     pub fn of_server(remote: &Remote) -> Result<Scene> {
-        let rt = tokio::runtime::Builder::new_current_thread()
-            .enable_all()
-            .build()?;
-        rt.block_on(async {
-            let m = remote.manifest().await?;
-            let graph = match m.header.cells {
-                Some(_) => Some(remote.cells().await?),
-                None => None,
-            };
-            Ok(Scene {
-                graph,
-                bounds: m.header.bounds,
-                objects: m.header.instances.iter().map(|i| i.bounds).collect(),
-            })
+        let (m, graph) = portico_native::net::model_blocking(remote)?;
+        Ok(Scene {
+            graph,
+            bounds: m.header.bounds,
+            objects: m.header.instances.iter().map(|i| i.bounds).collect(),
         })
     }
 }

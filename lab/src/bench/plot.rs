@@ -2,44 +2,18 @@
 //! a horizontal line (Funkhouser Fig. 4.22, one line per run instead of one panel each), and Es
 //! and Et per frame (the per-frame curves RRB's missing figures showed, §8.2).
 //!
-//! Text needs a font registered with plotters at run time: [`fonts_available`] loads DejaVu
-//! Sans from `/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf` once. Without it the plots are
-//! drawn without any text (no caption, tick labels or legend) instead of failing.
+//! Text needs the font of [`crate::style`]; without it the plots have no text.
 
 use super::FrameRecord;
+use crate::style::PALETTE;
+pub use crate::style::fonts_available;
 use anyhow::{Result, anyhow};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
-use std::sync::OnceLock;
 
-/// Where the plots' font is looked for.
-pub const FONT_PATH: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
 /// Plot size in pixels.
 const SIZE: (u32, u32) = (960, 540);
-/// Line colours, one per run in order (Regular black).
-const COLOURS: [RGBColor; 7] = [
-    RGBColor(0, 0, 0),
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-];
-
-/// Registers DejaVu Sans as plotters' `sans-serif` once; whether text can be drawn.
-pub fn fonts_available() -> bool {
-    static REGISTERED: OnceLock<bool> = OnceLock::new();
-    *REGISTERED.get_or_init(|| {
-        let Ok(bytes) = std::fs::read(FONT_PATH) else {
-            tracing::warn!("{FONT_PATH} not found: plots are drawn without text");
-            return false;
-        };
-        let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-        plotters::style::register_font("sans-serif", FontStyle::Normal, bytes).is_ok()
-    })
-}
 
 /// One named line of a chart.
 struct Line {
@@ -157,7 +131,7 @@ fn draw_chart(
     }
     mesh.draw().map_err(plot_error)?;
     for (i, line) in c.lines.iter().enumerate() {
-        let colour = COLOURS[i % COLOURS.len()];
+        let colour = PALETTE[i % PALETTE.len()];
         let drawn = chart
             .draw_series(LineSeries::new(
                 line.points.iter().copied(),

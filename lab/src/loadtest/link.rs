@@ -1,4 +1,4 @@
-//! The emulated network link between one simulated client and the server (DESIGN §7): every
+//! The emulated network link between one simulated client and the server: every
 //! request pays the round-trip time — half before it is sent, half after its answer — and every
 //! response body is paced through a per-client token bucket so that the client never receives
 //! more than `rate` bytes per second, however many requests it has in flight.
@@ -23,7 +23,7 @@ pub struct Link {
 }
 
 impl Default for Link {
-    /// DESIGN §7's link: 20 ms round trip, 100 Mbit/s.
+    /// The default link: 20 ms round trip, 100 Mbit/s.
     fn default() -> Self {
         Link {
             rtt_s: 0.020,

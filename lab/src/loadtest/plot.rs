@@ -2,33 +2,16 @@
 //! (Funkhouser Fig. 5.12–5.13) and the lookahead set in MB per frame (Fig. 5.11, with the
 //! "0 frames" curve: what is visible from the actual viewpoint), both along client 0's frames.
 //!
-//! Text needs a font: DejaVu Sans is loaded from the system at run time and registered with
-//! plotters once; without it the plots are drawn without any text rather than not at all.
+//! Text needs the font of [`crate::style`]; without it the plots have no text.
 
 use super::LoadtestSummary;
+use crate::style::{PALETTE, fonts_available as fonts};
 use anyhow::{Result, anyhow};
 use plotters::prelude::*;
-use plotters::style::FontStyle;
 use std::path::Path;
-use std::sync::OnceLock;
 
-/// Where the font is looked for.
-pub const FONT: &str = "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf";
 /// Most prefetch policies drawn in one plot (the best by mean LODs skipped).
 pub const MAX_LINES: usize = 6;
-/// Line colours: strong and distinct on white (plotters' Palette99 starts with pale yellows).
-const COLORS: [RGBColor; 10] = [
-    RGBColor(214, 39, 40),
-    RGBColor(31, 119, 180),
-    RGBColor(44, 160, 44),
-    RGBColor(148, 103, 189),
-    RGBColor(255, 127, 14),
-    RGBColor(23, 190, 207),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(0, 0, 0),
-    RGBColor(127, 127, 127),
-];
 /// Plot size in pixels.
 const SIZE: (u32, u32) = (1000, 560);
 
@@ -43,19 +26,6 @@ pub struct Plots {
 
 /// One named line.
 pub type Line = (String, Vec<f64>);
-
-/// Registers the font with plotters once; whether text can be drawn.
-pub fn fonts() -> bool {
-    static OK: OnceLock<bool> = OnceLock::new();
-    *OK.get_or_init(|| {
-        let Ok(bytes) = std::fs::read(FONT) else {
-            tracing::warn!("{FONT} not found: plots will have no text");
-            return false;
-        };
-        let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
-        plotters::style::register_font("sans-serif", FontStyle::Normal, bytes).is_ok()
-    })
-}
 
 /// Writes `lods_skipped.png` and `lookahead_mb.png` into `out`.
 pub fn write_all(out: &Path, s: &LoadtestSummary) -> Result<Plots> {
@@ -163,7 +133,7 @@ pub fn lines(path: &Path, title: &str, y_desc: &str, series: &[Line], text: bool
     }
     mesh.draw().map_err(|e| err(&e))?;
     for (i, (name, ys)) in series.iter().enumerate() {
-        let color = COLORS[i % COLORS.len()].to_rgba();
+        let color = PALETTE[(i + 1) % PALETTE.len()].to_rgba();
         let drawn = chart
             .draw_series(LineSeries::new(
                 peaks(ys, PEAK_BUCKETS),

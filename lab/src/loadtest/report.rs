@@ -133,7 +133,7 @@ fn headline(r: &mut String, s: &LoadtestSummary) {
     let _ = writeln!(
         r,
         "\nBest prefetch policy `{}` against demand fetch: **{}** fewer LODs skipped per frame \
-         ({} after the warm-up) and {} smaller LOD deficit (DESIGN §8 asks ≥ 5× fewer LODs \
+         ({} after the warm-up) and {} smaller LOD deficit (the target is ≥ 5× fewer LODs \
          skipped).\n",
         best.name,
         ratio(best.lods_skipped_vs_demand),

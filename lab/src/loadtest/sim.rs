@@ -1,11 +1,11 @@
-//! One simulated client (DESIGN §7): the real client's frame loop without a GPU. Each frame it
+//! One simulated client: the real client's frame loop without a GPU. Each frame it
 //! takes what its IO task delivered into a byte-budgeted [`ObjectCache`] (values are sizes
-//! only), runs the client's visibility ([`view::visible`]) and candidates, lets the `optimize`
-//! elider choose among RESIDENT LODs with the default cost model, and counts what it had to give
-//! up (LODs skipped, objects skipped: Funkhouser §5.2.4). It never waits for the network.
+//! only), runs the client's own frame decision ([`Decider`]: visibility, candidates, the
+//! `optimize` elider over RESIDENT LODs with the default cost model), and counts what it had to
+//! give up (LODs skipped, objects skipped: Funkhouser §5.2.4). It never waits for the network.
 //!
-//! Its IO task is the real client's ([`portico_native::drive::drive`]) fetching through the client's
-//! emulated [`Pipe`], with its need list made in one of three ways:
+//! Its IO task is the real client's ([`portico_native::drive::drive`]) fetching through the
+//! client's emulated [`Pipe`], with its need list made in one of three ways:
 //! - [`Mode::Prefetch`]: the server's lookahead, as the real client: post the observer and the
 //!   held set to `/v1/prefetch` once per frame, demote the eviction hints, read the latest
 //!   answer's items in need order a few at a time (Funkhouser §5.2–5.3);
@@ -347,8 +347,8 @@ impl Client {
     }
 
     /// What this frame lacked, most urgent first: the eye cell's stab list, the coarsest LOD of
-    /// every wanted object with nothing to draw (DESIGN §5: a coarse LOD of everything visible
-    /// first), then every wanted LOD not resident; biggest objects on screen first.
+    /// every wanted object with nothing to draw (a coarse LOD of everything visible first,
+    /// Funkhouser 1993 §5.2.4), then every wanted LOD not resident; biggest objects on screen first.
     fn missing_now(&self, d: &Decided) -> Vec<u32> {
         let mut stand_ins = Vec::new();
         let mut wanted = Vec::new();

@@ -1,5 +1,5 @@
 //! `portico loadtest --stress`: the server's prefetch answer under many concurrent clients
-//! (DESIGN §8: p99 ≤ 2 ms at 64 clients on 2 cores; Funkhouser's lookahead took 3 ms mean).
+//! (target: p99 ≤ 2 ms at 64 clients on 2 cores; Funkhouser's lookahead took 3 ms mean).
 //!
 //! Each client walks the path (client `i` starting `i/N` of the way along and `i/N` of a frame
 //! later, as independent clients are out of phase) and posts one `/v1/prefetch` per frame, as

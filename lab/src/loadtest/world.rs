@@ -184,11 +184,7 @@ pub struct Plan {
 
 /// Fetches the model and the stab lists along the path, and computes the oracle's truth.
 pub async fn load(remote: &Remote, path: &CameraPath, plan: Plan) -> Result<World> {
-    let m = remote.manifest().await.context("loading the model")?;
-    let graph = match m.header.cells {
-        Some(_) => Some(remote.cells().await.context("loading the cell graph")?),
-        None => None,
-    };
+    let (m, graph) = remote.model().await.context("loading the model")?;
     let far = view::far_plane(&m.header.bounds);
     let mut world = World {
         bounds: m.header.instances.iter().map(|i| i.bounds).collect(),
