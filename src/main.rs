@@ -1,4 +1,4 @@
-//! `portico`: one command line over the Portico crates (DESIGN §1). Each subcommand lives in
+//! `portico`: one command line over the Portico crates. Each subcommand lives in
 //! `cmd/` and stays thin: parse arguments, call the library, report.
 
 mod cmd;

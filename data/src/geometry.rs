@@ -1,6 +1,6 @@
 //! In-memory meshes and the on-disk geometry segment layout.
 //!
-//! A geometry segment is laid out for direct GPU upload (DESIGN §2): a 32-byte header, then the
+//! A geometry segment is laid out for direct GPU upload: a 32-byte header, then the
 //! interleaved vertex stream (`Vertex`, 20 bytes: position `f32x3`, normal `snorm8x4`, colour
 //! `unorm8x4`), then the index stream (`u16` when every index fits, else `u32`), each 4-byte
 //! aligned. A client binds the vertex and index ranges straight from the bytes it received.

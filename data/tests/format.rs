@@ -1,4 +1,4 @@
-//! Display database round trips and corruption handling (DESIGN §2: a truncated, corrupt or
+//! Display database round trips and corruption handling (a truncated, corrupt or
 //! foreign file gives a clear error naming the problem, never a panic).
 
 use glam::{Mat4, Vec3};

@@ -1,4 +1,4 @@
-//! Portico's wire types and their encodings (DESIGN §4). No I/O: the server and the client both
+//! Portico's wire types and their encodings. No I/O: the server and the client both
 //! depend on this crate and agree on bytes through it.
 //!
 //! Every message is serde-serialisable, so it travels as bincode 2 (the compact default) or JSON

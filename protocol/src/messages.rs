@@ -1,4 +1,4 @@
-//! The messages of the HTTP and WebSocket API (DESIGN §4).
+//! The messages of the HTTP and WebSocket API.
 //!
 //! - [`Manifest`]: what `/v1/manifest` answers: the segment table and the model header.
 //! - [`PrefetchRequest`] / [`PrefetchResponse`]: `POST /v1/prefetch`, Funkhouser §5.2's lookahead

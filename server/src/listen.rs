@@ -40,7 +40,7 @@ const SETTLE: Duration = Duration::from_secs(1);
 const MAX_HEAD_BUFFER: usize = 64 << 10;
 
 /// The default connection cap: the file-descriptor limit (raised to its hard limit where the
-/// system allows) less [`RESERVED_FDS`], between 64 and 16,384.
+/// system allows) less 64 reserved for files and the listener, between 64 and 16,384.
 pub fn default_max_connections() -> usize {
     let limit = raise_fd_limit().unwrap_or(1024);
     limit.saturating_sub(RESERVED_FDS).clamp(64, 16_384) as usize

@@ -1,4 +1,4 @@
-//! `portico demo [--preset small] [--out DIR]`: the whole system in one command (DESIGN §7).
+//! `portico demo [--preset small] [--out DIR]`: the whole system in one command.
 //!
 //! Generates a furnished building, builds its display database, serves it on a free loopback
 //! port in this process, walks a tour through it with the real headless client, runs a short

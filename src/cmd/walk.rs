@@ -1,5 +1,5 @@
 //! `portico walk --server URL (--path FILE | --path-kind tour) --budget-ms 50 --cache-mb 64
-//! --size 640x480 --elision optimize --out DIR`: the headless walkthrough client (DESIGN §5).
+//! --size 640x480 --elision optimize --out DIR`: the headless walkthrough client.
 
 use crate::progress::Bars;
 use anyhow::{Context, Result, bail};

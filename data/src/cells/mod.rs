@@ -107,7 +107,7 @@ pub enum KdNode {
     },
 }
 
-/// The compact cell graph a client needs for its own culling (DESIGN §4: `/v1/cells`).
+/// The compact cell graph a client needs for its own culling (`/v1/cells`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CellGraph {
     /// Box of the whole subdivision (the model's bounds plus a margin of outside space).

@@ -11,7 +11,7 @@ use glam::Vec3;
 const HALF_FOV: f32 = 0.52;
 /// Seconds per orbit, at most and at least (a small object is not circled in one second, a
 /// campus not in ten minutes).
-const ORBIT_SECONDS: (f32, f32) = (12.0, 60.0);
+pub const ORBIT_SECONDS: (f32, f32) = (12.0, 60.0);
 
 /// One turn around the model's bounds, looking at their centre from a little above, at a
 /// distance that keeps the whole model in view; `speed` in m/s sets the pace within

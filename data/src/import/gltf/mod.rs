@@ -1,14 +1,14 @@
 //! glTF 2.0 / GLB import.
 //!
 //! The `gltf` crate parses and cross-checks the JSON (every index in range); everything read from
-//! the buffers goes through [`accessor`], which checks each accessor before reading it, so a
+//! the buffers goes through `accessor`, which checks each accessor before reading it, so a
 //! broken file is refused with one line naming its mesh, primitive and accessor, never a panic.
 //!
 //! - Shared definitions: one glTF mesh used by several nodes becomes one definition with several
 //!   instances (Funkhouser §3.1). A node's `MSFT_lod` extension (`{"ids": [node, ...]}`, coarser
 //!   and coarser) gives the definition's lower LODs; the generator writes its LODs that way.
 //! - Geometry as real exporters write it: triangle lists, strips and fans; `KHR_mesh_quantization`
-//!   (dequantised) and `EXT_meshopt_compression` (decoded, [`buffers`]); sparse accessors; morph
+//!   (dequantised) and `EXT_meshopt_compression` (decoded, `buffers`); sparse accessors; morph
 //!   targets at their default weights; skinned meshes placed by their skeleton's rest pose (glTF
 //!   §3.7.3: the skinned node's own transform is ignored). Draco and glTF 1.0 are refused.
 //! - Coordinates in double precision: node transforms are read from the JSON as f64 and composed
