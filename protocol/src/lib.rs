@@ -6,6 +6,7 @@
 //! incompatible change; the server answers clients of another version with a clear error.
 
 pub mod batch;
+pub mod hex;
 mod messages;
 
 pub use messages::*;

@@ -33,7 +33,9 @@ pub struct SegmentInfo {
     pub kind: u16,
     /// Length in bytes as served.
     pub bytes: u64,
-    /// xxh3-64 of the bytes: the segment's strong ETag.
+    /// xxh3-64 of the bytes: the segment's strong ETag. In JSON a 16-digit hex string
+    /// (JavaScript numbers cannot hold it), in bincode a `u64`.
+    #[serde(with = "crate::hex")]
     pub checksum: u64,
 }
 
