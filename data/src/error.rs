@@ -16,11 +16,15 @@ pub enum DataError {
         /// What the OS said.
         error: std::io::Error,
     },
-    /// The file does not start with the Portico magic bytes: it is some other kind of file.
-    #[error("{}: not a Portico display database (bad magic bytes)", path.display())]
+    /// The file does not start with the Portico magic bytes: it is some other kind of file
+    /// (the message says which when it is a model `portico build` reads, and how to build it).
+    #[error("{}: not a Portico display database{}", path.display(), not_portico_hint(path, *model))]
     NotPortico {
         /// The file involved.
         path: PathBuf,
+        /// What the file looks like when it is a model `portico build` reads: "GLB", "glTF",
+        /// "OBJ".
+        model: Option<&'static str>,
     },
     /// The file was written by a different, incompatible version of the format.
     #[error("{}: format version {found} is not supported (this build reads version {expected}); rebuild it with `portico build`", path.display())]
@@ -97,3 +101,37 @@ impl DataError {
 
 /// Result alias for the `data` crate.
 pub type Result<T, E = DataError> = std::result::Result<T, E>;
+
+/// The tail of [`DataError::NotPortico`]'s message: what to run instead.
+fn not_portico_hint(path: &std::path::Path, model: Option<&str>) -> String {
+    let stem = path
+        .file_stem()
+        .map_or("model".into(), |s| s.to_string_lossy().into_owned());
+    match model {
+        Some(kind) => format!(
+            " but {} {kind} model: build one with `portico build {} -o {stem}.portico`",
+            if kind.starts_with('O') { "an" } else { "a" },
+            path.display()
+        ),
+        None => " (bad magic bytes): make one with `portico build MODEL -o FILE.portico`".into(),
+    }
+}
+
+/// What a file that is not a display database looks like, from its first bytes: a model
+/// `portico build` reads ("GLB", "glTF", "OBJ"), or `None`.
+pub fn sniff_model(head: &[u8]) -> Option<&'static str> {
+    if head.starts_with(b"glTF") {
+        return Some("GLB");
+    }
+    let text = String::from_utf8_lossy(&head[..head.len().min(4096)]);
+    let text = text.trim_start_matches('\u{feff}').trim_start();
+    if text.starts_with('{') && text.contains("\"asset\"") {
+        return Some("glTF");
+    }
+    let obj = text.lines().map(str::trim).any(|l| {
+        ["v ", "vn ", "vt ", "f ", "o ", "g ", "mtllib ", "usemtl "]
+            .iter()
+            .any(|k| l.starts_with(k))
+    });
+    obj.then_some("OBJ")
+}

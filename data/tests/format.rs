@@ -192,7 +192,21 @@ fn truncated_corrupt_and_foreign_files_are_clear_errors() {
     assert!(matches!(e, DataError::Truncated { .. }), "{e}");
     let e = open_bytes(b"glTF\x02\0\0\0 not ours".to_vec()).unwrap_err();
     assert!(matches!(e, DataError::NotPortico { .. }), "{e}");
-    assert!(e.to_string().starts_with("x.portico: not a Portico"), "{e}");
+    assert_eq!(
+        e.to_string(),
+        "x.portico: not a Portico display database but a GLB model: build one with \
+         `portico build x.portico -o x.portico`"
+    );
+    let e = open_bytes(b"# exported\nmtllib a.mtl\nv 0 0 0\n".to_vec()).unwrap_err();
+    assert!(e.to_string().contains("but an OBJ model"), "{e}");
+    let e = open_bytes(b"{\"asset\":{\"version\":\"2.0\"}}".to_vec()).unwrap_err();
+    assert!(e.to_string().contains("but a glTF model"), "{e}");
+    let e = open_bytes(b"PK\x03\x04 a zip".to_vec()).unwrap_err();
+    assert!(
+        e.to_string()
+            .ends_with("(bad magic bytes): make one with `portico build MODEL -o FILE.portico`"),
+        "{e}"
+    );
 
     let mut v = good.clone();
     v[8..12].copy_from_slice(&(FORMAT_VERSION + 1).to_le_bytes());

@@ -30,6 +30,7 @@ impl Remote {
     pub fn new(base: &str, token: Option<String>) -> Result<Remote> {
         let http = reqwest::Client::builder()
             .timeout(Duration::from_secs(30))
+            .connect_timeout(Duration::from_secs(10))
             .pool_max_idle_per_host(16)
             .build()
             .context("building the HTTP client")?;
@@ -61,7 +62,7 @@ impl Remote {
         let resp = req
             .send()
             .await
-            .with_context(|| format!("{}: {what}", self.base))?;
+            .map_err(|e| send_error(&self.base, what, &e))?;
         let status = resp.status();
         let body = resp
             .bytes()
@@ -169,4 +170,22 @@ pub fn model_blocking(remote: &Remote) -> Result<(Manifest<Header>, Option<CellG
         .enable_all()
         .build()?;
     rt.block_on(remote.model())
+}
+
+/// A request that got no answer, in one line: the innermost cause (what the OS said) and,
+/// when nothing listens, how to start a server, instead of reqwest's chain of wrappers.
+fn send_error(base: &str, what: &str, e: &reqwest::Error) -> anyhow::Error {
+    let mut root: &dyn std::error::Error = e;
+    while let Some(next) = root.source() {
+        root = next;
+    }
+    if e.is_connect() {
+        anyhow::anyhow!(
+            "{base}: cannot connect ({root}); is `portico serve FILE.portico` running there?"
+        )
+    } else if e.is_timeout() {
+        anyhow::anyhow!("{base}: {what}: no answer in time ({root})")
+    } else {
+        anyhow::anyhow!("{base}: {what}: {root}")
+    }
 }

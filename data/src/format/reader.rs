@@ -212,6 +212,7 @@ fn read_prologue(path: &Path, map: &[u8]) -> Result<Prologue> {
     if map.len() < MAGIC.len() || map[..MAGIC.len()] != MAGIC {
         return Err(DataError::NotPortico {
             path: path.to_path_buf(),
+            model: crate::error::sniff_model(map),
         });
     }
     let Some(head) = map.get(..PROLOGUE_SIZE) else {
