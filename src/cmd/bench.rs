@@ -3,6 +3,7 @@
 //! --out DIR`: frame rate and image fidelity of the detail elision algorithms
 //! (Funkhouser Table 4.3 / Fig. 4.22, RRB §5.2-5.3). The work is `portico_lab::bench`.
 
+use crate::cmd::values;
 use crate::progress::Bars;
 use anyhow::Result;
 use portico_data::Database;
@@ -21,16 +22,16 @@ pub struct Args {
     /// Frame-time budget of the elision algorithms, milliseconds.
     #[arg(long, default_value_t = 50.0)]
     budget_ms: f64,
-    /// Image size WxH.
-    #[arg(long, default_value = "320x240")]
+    /// Image size WxH, pixels.
+    #[arg(long, default_value = values::SIZE)]
     size: String,
     /// Stop after this many frames.
     #[arg(long)]
     max_frames: Option<u64>,
-    /// Runs, comma-separated: regular, none, static, feedback, optimize, coarsest (regular is
-    /// always run first: it is the fidelity reference).
-    #[arg(long, default_value = "regular,none,static,feedback,optimize")]
-    algorithms: String,
+    /// Runs, comma-separated (regular is always run first: it is the fidelity reference).
+    #[arg(long, default_value = "regular,none,static,feedback,optimize", value_delimiter = ',',
+          value_parser = values::bench_run())]
+    algorithms: Vec<String>,
     /// Path time between frames, milliseconds (frame i shows the path at i x this).
     #[arg(long, default_value_t = 50.0)]
     frame_step_ms: f64,
@@ -41,7 +42,7 @@ pub struct Args {
     #[arg(long, default_value_t = 60.0)]
     fov: f32,
     /// Output directory (summary.json, report.md, frames.csv, PNG plots).
-    #[arg(long)]
+    #[arg(short = 'o', long, visible_alias = "output", value_name = "DIR")]
     out: PathBuf,
     /// Print the summary as JSON instead of the table.
     #[arg(long)]
@@ -60,7 +61,7 @@ pub fn run(a: Args) -> Result<()> {
     let mut cfg = BenchConfig::new(a.db.clone(), path, a.budget_ms / 1e3, a.out.clone());
     cfg.size = crate::cmd::walk::parse_size(&a.size)?;
     cfg.max_frames = a.max_frames;
-    cfg.algorithms = RunKind::parse_list(&a.algorithms)?;
+    cfg.algorithms = RunKind::parse_list(&a.algorithms.join(","))?;
     cfg.dt_s = a.frame_step_ms / 1e3;
     cfg.patch_px = a.patch_px;
     cfg.fovy = a.fov.clamp(10.0, 150.0).to_radians();

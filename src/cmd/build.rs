@@ -15,8 +15,13 @@ pub struct Args {
     /// Model files: .obj (with .mtl), .gltf or .glb.
     #[arg(required = true)]
     models: Vec<PathBuf>,
-    /// Output display database.
-    #[arg(short, long)]
+    /// Output display database (.portico).
+    #[arg(
+        short = 'o',
+        long = "out",
+        visible_alias = "output",
+        value_name = "FILE"
+    )]
     output: PathBuf,
     /// Store every instance's geometry separately with baked lighting (large: the out-of-core case).
     #[arg(long)]

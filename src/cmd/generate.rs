@@ -1,5 +1,6 @@
 //! `portico generate --preset tiny|small|soda|mega [--seed N] [--floors F] -o building.glb`
 
+use crate::cmd::values;
 use crate::progress::Bars;
 use anyhow::{Context, Result};
 use portico_generator::{Params, Preset, generate};
@@ -10,8 +11,8 @@ use std::time::Instant;
 /// Arguments of `portico generate`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Size of the building: tiny (tests), small (demo), soda (Soda Hall scale), mega (10x soda).
-    #[arg(long, default_value = "small")]
+    /// Size of the building.
+    #[arg(long, default_value = "small", value_parser = values::preset())]
     preset: Preset,
     /// Random seed: the same seed gives the same bytes.
     #[arg(long, default_value_t = 1)]
@@ -20,7 +21,12 @@ pub struct Args {
     #[arg(long)]
     floors: Option<u32>,
     /// Output GLB file.
-    #[arg(short, long)]
+    #[arg(
+        short = 'o',
+        long = "out",
+        visible_alias = "output",
+        value_name = "FILE"
+    )]
     output: PathBuf,
 }
 

@@ -1,6 +1,6 @@
 //! `portico inspect FILE.portico [--json] [--verify]`
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use portico_data::Database;
 use portico_data::stats::stats;
 use std::path::PathBuf;
@@ -21,14 +21,30 @@ pub struct Args {
 /// Opens (validating the prologue, index and header) and prints statistics.
 pub fn run(a: Args) -> Result<()> {
     let db = Database::open(&a.file)?;
-    if a.verify {
-        db.verify_all()?;
-    }
+    let verdict = match a.verify {
+        true => {
+            db.verify_all().context("verify: FAILED")?;
+            let bytes: u64 = db.segments().iter().map(|e| e.length).sum();
+            Some(format!(
+                "verify: OK, all {} segments match their checksums ({:.1} MB read)",
+                db.segments().len(),
+                bytes as f64 / 1e6
+            ))
+        }
+        false => None,
+    };
     let s = stats(&db);
     if a.json {
         println!("{}", serde_json::to_string_pretty(&s)?);
+        // stdout stays one JSON document; the verdict goes beside it.
+        if let Some(v) = verdict {
+            eprintln!("{v}");
+        }
     } else {
         print!("{}", s.to_text());
+        if let Some(v) = verdict {
+            println!("{v}");
+        }
     }
     Ok(())
 }

@@ -4,6 +4,7 @@
 //! measure prefetch policies against demand fetch and an oracle (Funkhouser 1993 §5.3);
 //! with `--stress 1,16,64`, the server's prefetch latency at those numbers of clients instead.
 
+use crate::cmd::values;
 use crate::progress::Bars;
 use anyhow::{Context, Result};
 use portico_client::policy::{parse_policy, policy_spec};
@@ -30,18 +31,18 @@ pub struct Args {
     clients: usize,
     #[command(flatten)]
     route: crate::cmd::path::PathArgs,
-    /// Prefetch policy, e.g. depth=16,gran=object,range=direction,look=any,read=4m,size=16.
-    #[arg(long, default_value = "")]
+    #[arg(long, default_value = "", help = values::POLICY_HELP)]
     policy: String,
-    /// Funkhouser's policy grid instead of one policy: reduced (13 runs, the default), full
-    /// (144), depth (Table 5.1), gran (Table 5.3) or cull (Tables 5.5-5.10). Keys of --policy
-    /// that the grid does not vary (read, size) still apply.
-    #[arg(long, num_args = 0..=1, default_missing_value = "reduced", value_name = "GRID")]
+    /// Funkhouser's policy grid instead of one policy (`--sweep` alone: reduced). Keys of
+    /// --policy that the grid does not vary (read, size) still apply.
+    #[arg(long, num_args = 0..=1, default_missing_value = "reduced", value_name = "GRID",
+          value_parser = values::sweep())]
     sweep: Option<String>,
-    /// Each client's emulated link.
+    /// Each client's emulated link: rtt=DURATION (e.g. 20ms, 0.05s), rate=RATE (e.g. 100mbit,
+    /// 10mbit, 1gbit, 500kbit).
     #[arg(long, default_value = "rtt=20ms,rate=100mbit")]
     link: String,
-    /// Cache budget per client in MB (MiB).
+    /// Cache budget per client, MiB (2^20 bytes).
     #[arg(long, default_value_t = 64)]
     cache_mb: u64,
     /// Frame budget (and frame time) in milliseconds.
@@ -54,7 +55,7 @@ pub struct Args {
     #[arg(long)]
     no_baselines: bool,
     /// Output directory for summary.json, report.md, frames.csv and the plots.
-    #[arg(long)]
+    #[arg(short = 'o', long, visible_alias = "output", value_name = "DIR")]
     out: PathBuf,
     /// Print the summary as JSON.
     #[arg(long)]
@@ -201,7 +202,7 @@ fn stress(a: &Args, path: portico_data::path::CameraPath, policy: Policy) -> Res
 /// A short human summary: one line per run and the prefetch-vs-demand ratio.
 pub fn print_summary(s: &LoadtestSummary, out: &std::path::Path) {
     println!(
-        "loadtest: {} clients x {} frames on {} ({}), {}, cache {:.0} MB",
+        "loadtest: {} clients x {} frames on {} ({}), {}, cache {:.0} MiB",
         s.clients,
         s.frames_per_client,
         s.model,
@@ -235,6 +236,9 @@ pub fn print_summary(s: &LoadtestSummary, out: &std::path::Path) {
             ratio(best.lods_skipped_vs_demand),
             ratio(best.lod_deficit_vs_demand)
         );
+    }
+    for v in portico_lab::verdict::loadtest(s) {
+        println!("  {v}");
     }
     println!("  report: {}", out.join("report.md").display());
 }

@@ -9,5 +9,6 @@ pub mod inspect;
 pub mod loadtest;
 pub mod path;
 pub mod serve;
+pub mod values;
 pub mod verify;
 pub mod walk;

@@ -2,6 +2,7 @@
 //! standard observer paths for any model (tours through its rooms, or around and through a
 //! model without rooms), for walks, load tests and benchmarks.
 
+use crate::cmd::values;
 use anyhow::{Context, Result};
 use portico_data::Database;
 use portico_data::cells::CellGraph;
@@ -80,7 +81,7 @@ pub struct PathArgs {
     #[arg(long, value_enum)]
     pub path_kind: Option<Kind>,
     /// Legs of a generated tour.
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = values::LEGS)]
     pub legs: usize,
     /// Seed of a generated path.
     #[arg(long, default_value_t = 1)]
@@ -126,7 +127,7 @@ pub struct Args {
     #[arg(long, value_enum, default_value = "tour")]
     kind: Kind,
     /// Legs of a tour (random rooms visited).
-    #[arg(long, default_value_t = 6)]
+    #[arg(long, default_value_t = values::LEGS)]
     legs: usize,
     /// Random seed.
     #[arg(long, default_value_t = 1)]
@@ -137,8 +138,13 @@ pub struct Args {
     /// Turning speed, degrees/s.
     #[arg(long, default_value_t = 90.0)]
     turn: f32,
-    /// Output JSON file.
-    #[arg(short, long)]
+    /// Output path JSON file.
+    #[arg(
+        short = 'o',
+        long = "out",
+        visible_alias = "output",
+        value_name = "FILE"
+    )]
     output: PathBuf,
 }
 

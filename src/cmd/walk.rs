@@ -1,6 +1,7 @@
 //! `portico walk --server URL (--path FILE | --path-kind tour) --budget-ms 50 --cache-mb 64
 //! --size 640x480 --elision optimize --out DIR`: the headless walkthrough client.
 
+use crate::cmd::values;
 use crate::progress::Bars;
 use anyhow::{Context, Result, bail};
 use portico_client::elision::Algorithm;
@@ -25,20 +26,19 @@ pub struct Args {
     /// Frame-time budget in milliseconds.
     #[arg(long, default_value_t = 50.0)]
     budget_ms: f64,
-    /// Cache budget in MB (MiB).
+    /// Client cache budget, MiB (2^20 bytes).
     #[arg(long, default_value_t = 64)]
     cache_mb: u64,
-    /// Image size WxH.
-    #[arg(long, default_value = "640x480")]
+    /// Image size WxH, pixels.
+    #[arg(long, default_value = values::SIZE)]
     size: String,
-    /// Detail elision: none, static, feedback, optimize.
-    #[arg(long, default_value = "optimize")]
+    /// Detail elision.
+    #[arg(long, default_value = "optimize", value_parser = values::elision())]
     elision: Algorithm,
-    /// Prefetch policy, e.g. depth=16,gran=object,range=direction,look=any,read=1m.
-    #[arg(long, default_value = "")]
+    #[arg(long, default_value = "", help = values::POLICY_HELP)]
     policy: String,
     /// Output directory for frames.csv, summary.json and PNGs.
-    #[arg(long)]
+    #[arg(short = 'o', long, visible_alias = "output", value_name = "DIR")]
     out: Option<PathBuf>,
     /// Save every N-th frame as PNG (0 = none).
     #[arg(long, default_value_t = 0)]
@@ -65,6 +65,9 @@ pub struct Args {
     #[arg(long, requires = "window")]
     record: Option<PathBuf>,
 }
+
+/// Bytes in a MiB: cache budgets are binary (`--cache-mb 64` is 64 MiB), data volumes decimal.
+pub const MIB: f64 = 1_048_576.0;
 
 /// Parses `WxH`.
 pub fn parse_size(s: &str) -> Result<(u32, u32)> {
@@ -165,6 +168,13 @@ fn interactive(_: &WalkConfig, _: Option<PathBuf>) -> Result<WalkSummary> {
 
 /// A short human summary.
 pub fn print_summary(s: &WalkSummary) {
+    print_figures(s);
+    for v in portico_lab::verdict::walk(s) {
+        println!("  {v}");
+    }
+}
+
+fn print_figures(s: &WalkSummary) {
     let ms = |x: f64| x * 1e3;
     println!(
         "walk: {} frames of {} on {} ({})",
@@ -192,9 +202,9 @@ pub fn print_summary(s: &WalkSummary) {
         s.lods_skipped.mean, s.lods_skipped.max, s.objects_skipped.mean, s.objects_skipped.max
     );
     println!(
-        "  cache: peak {:.1} of {:.1} MB, {} evictions; read {} segments, {:.1} MB; fetch latency p50 {:.1} ms p99 {:.1} ms",
-        s.cache_peak_bytes as f64 / 1e6,
-        s.cache_budget as f64 / 1e6,
+        "  cache: peak {:.1} of {:.1} MiB, {} evictions; read {} segments, {:.1} MB; fetch latency p50 {:.1} ms p99 {:.1} ms",
+        s.cache_peak_bytes as f64 / MIB,
+        s.cache_budget as f64 / MIB,
         s.evictions,
         s.segments_read,
         s.bytes_read as f64 / 1e6,
