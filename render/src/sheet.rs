@@ -36,6 +36,45 @@ pub fn contact_sheet(images: &[RgbaImage], cols: u32, thumb_w: u32) -> Option<Rg
     Some(sheet)
 }
 
+/// Mean absolute difference of two images per colour channel (0–255); `f64::INFINITY` when
+/// their sizes differ.
+pub fn mean_difference(a: &RgbaImage, b: &RgbaImage) -> f64 {
+    if a.dimensions() != b.dimensions() {
+        return f64::INFINITY;
+    }
+    let sum: u64 = a
+        .pixels()
+        .zip(b.pixels())
+        .map(|(p, q)| (0..3).map(|k| p[k].abs_diff(q[k]) as u64).sum::<u64>())
+        .sum();
+    sum as f64 / (3 * a.width() as u64 * a.height() as u64).max(1) as f64
+}
+
+/// At most `want` of `images` for a contact sheet, in order: an image that differs from the
+/// last one kept by less than `min_difference` ([`mean_difference`]) is dropped (a walk that
+/// stands still or turns slowly repeats itself), then `want` are taken evenly from the rest.
+pub fn distinct(images: Vec<RgbaImage>, want: usize, min_difference: f64) -> Vec<RgbaImage> {
+    let mut kept: Vec<RgbaImage> = Vec::new();
+    for img in images {
+        if kept
+            .last()
+            .is_none_or(|last| mean_difference(last, &img) >= min_difference)
+        {
+            kept.push(img);
+        }
+    }
+    if kept.len() <= want {
+        return kept;
+    }
+    let n = kept.len();
+    let picks: Vec<usize> = (0..want).map(|i| i * (n - 1) / (want - 1).max(1)).collect();
+    kept.into_iter()
+        .enumerate()
+        .filter(|(i, _)| picks.contains(i))
+        .map(|(_, img)| img)
+        .collect()
+}
+
 /// A unit cube centred on the origin, for path markers (white, unlit: the draw's colour
 /// shows as it is).
 fn cube() -> Mesh {
@@ -46,9 +85,27 @@ fn cube() -> Mesh {
     portico_data::hierarchy::colour_box(&unit, &[[1.0; 4]; 6])
 }
 
+/// Colours of the bird's-eye view's markers (linear RGBA): the path every half second, its
+/// start and its end.
+pub const PATH_COLOUR: [f32; 4] = [1.0, 0.1, 0.1, 1.0];
+/// See [`PATH_COLOUR`].
+pub const START_COLOUR: [f32; 4] = [0.1, 0.8, 0.1, 1.0];
+/// See [`PATH_COLOUR`].
+pub const END_COLOUR: [f32; 4] = [0.1, 0.3, 1.0, 1.0];
+
+/// A bird's-eye view and its scale.
+#[derive(Debug)]
+pub struct Birdseye {
+    /// The picture (the renderer's size).
+    pub image: RgbaImage,
+    /// Metres of the model per pixel of the picture (the view is orthographic).
+    pub metres_per_pixel: f32,
+}
+
 /// Renders the storey the path starts on from above (orthographic, everything above eye height
-/// left out so ceilings and upper floors do not hide it), with red markers along the path.
-pub fn birdseye(r: &mut Renderer, db: &Database, path: &CameraPath) -> Result<RgbaImage> {
+/// left out so ceilings and upper floors do not hide it), with markers along the path
+/// ([`PATH_COLOUR`]) and at its start and end.
+pub fn birdseye(r: &mut Renderer, db: &Database, path: &CameraPath) -> Result<Birdseye> {
     let h = db.header();
     let (start, _) = path.sample(0.0);
     let cut = start.y + 0.2;
@@ -70,13 +127,19 @@ pub fn birdseye(r: &mut Renderer, db: &Database, path: &CameraPath) -> Result<Rg
     }
     let marker = r.upload(&encode_geometry(&cube()))?;
     let steps = (path.duration() * 2.0).ceil().max(1.0) as usize;
-    let marks: Vec<Mat4> = (0..=steps)
+    let mark = |t: f32, size: f32, lift: f32| {
+        let (p, _) = path.sample(t);
+        Mat4::from_translation(Vec3::new(p.x, cut + 1.0 + lift, p.z))
+            * Mat4::from_scale(Vec3::new(size, 0.1, size))
+    };
+    let mut marks: Vec<(Mat4, [f32; 4])> = (0..=steps)
         .map(|i| {
-            let (p, _) = path.sample(path.duration() * i as f32 / steps as f32);
-            Mat4::from_translation(Vec3::new(p.x, cut + 1.0, p.z))
-                * Mat4::from_scale(Vec3::new(0.4, 0.1, 0.4))
+            let t = path.duration() * i as f32 / steps as f32;
+            (mark(t, 0.4, 0.0), PATH_COLOUR)
         })
         .collect();
+    marks.push((mark(0.0, 1.2, 0.2), START_COLOUR));
+    marks.push((mark(path.duration(), 1.2, 0.2), END_COLOUR));
     let mut draws: Vec<Draw> = meshes
         .iter()
         .map(|(m, t, c)| Draw {
@@ -85,18 +148,24 @@ pub fn birdseye(r: &mut Renderer, db: &Database, path: &CameraPath) -> Result<Rg
             color: *c,
         })
         .collect();
-    draws.extend(marks.iter().map(|t| Draw {
+    draws.extend(marks.iter().map(|(t, c)| Draw {
         mesh: &marker,
         transform: *t,
-        color: [1.0, 0.1, 0.1, 1.0],
+        color: *c,
     }));
-    r.render_view_proj(top_down(db, cut, r.aspect()), &draws)
+    let (view_proj, half_w) = top_down(db, cut, r.aspect());
+    r.render_view_proj(view_proj, &draws)
         .context("bird's-eye render")?;
-    Ok(r.read_pixels()?)
+    let image = r.read_pixels()?;
+    let metres_per_pixel = 2.0 * half_w / image.width().max(1) as f32;
+    Ok(Birdseye {
+        image,
+        metres_per_pixel,
+    })
 }
 
-/// Orthographic view straight down onto the model's footprint.
-fn top_down(db: &Database, cut: f32, aspect: f32) -> Mat4 {
+/// Orthographic view straight down onto the model's footprint, and its half width in metres.
+fn top_down(db: &Database, cut: f32, aspect: f32) -> (Mat4, f32) {
     let b = db.header().bounds;
     let centre = Vec3::new(
         (b.min[0] + b.max[0]) * 0.5,
@@ -115,7 +184,7 @@ fn top_down(db: &Database, cut: f32, aspect: f32) -> Mat4 {
         0.1,
         50.0 + cut - b.min[1] + 1.0,
     );
-    proj * view
+    (proj * view, half_w)
 }
 
 #[cfg(test)]
@@ -135,6 +204,23 @@ mod tests {
             "second thumbnail in place"
         );
         assert!(contact_sheet(&[], 3, 20).is_none());
+    }
+
+    #[test]
+    fn repeated_frames_are_left_off_the_sheet() {
+        let grey = |v: u8| RgbaImage::from_pixel(8, 8, image::Rgba([v, v, v, 255]));
+        let frames = vec![grey(10), grey(10), grey(11), grey(60), grey(60), grey(120)];
+        let kept = distinct(frames, 12, 2.0);
+        let values: Vec<u8> = kept.iter().map(|i| i.get_pixel(0, 0)[0]).collect();
+        assert_eq!(values, vec![10, 60, 120]);
+        // Evenly taken when more remain than wanted: first and last always.
+        let many: Vec<RgbaImage> = (0..10).map(|i| grey(i * 20)).collect();
+        let values: Vec<u8> = distinct(many, 4, 2.0)
+            .iter()
+            .map(|i| i.get_pixel(0, 0)[0])
+            .collect();
+        assert_eq!(values, vec![0, 60, 120, 180]);
+        assert_eq!(mean_difference(&grey(0), &grey(30)), 30.0);
     }
 
     #[test]

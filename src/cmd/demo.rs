@@ -5,6 +5,7 @@
 //! load test of the prefetch policy against the same server, and writes `DIR/report.md` with
 //! the frame-time and prefetch figures, a contact sheet of frames, a bird's-eye view and plots.
 
+use crate::cmd::values;
 use crate::cmd::walk::print_summary;
 use crate::progress::Bars;
 use anyhow::{Context, Result};
@@ -16,9 +17,11 @@ use portico_data::import::import_file;
 use portico_data::path::{CameraPath, PathKind, generate};
 use portico_generator::{Params, Preset};
 use portico_lab::loadtest::{Link, LoadtestConfig, LoadtestSummary, run as run_loadtest};
+use portico_lab::verdict::Verdict;
 use portico_native::walk::{WalkConfig, WalkSummary, walk};
 use portico_protocol::Policy;
 use portico_render::Renderer;
+use portico_render::sheet;
 use portico_server::{AppState, Config};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -28,25 +31,31 @@ use std::time::Instant;
 #[derive(clap::Args)]
 pub struct Args {
     /// Building size.
-    #[arg(long, default_value = "small")]
+    #[arg(long, default_value = "small", value_parser = values::preset())]
     preset: Preset,
     /// Random seed (building and tour).
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Output directory.
-    #[arg(long, default_value = "portico-demo")]
+    #[arg(
+        short = 'o',
+        long,
+        visible_alias = "output",
+        value_name = "DIR",
+        default_value = "portico-demo"
+    )]
     out: PathBuf,
     /// Legs of the tour (rooms visited).
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = values::LEGS)]
     legs: usize,
     /// Frame budget, ms.
     #[arg(long, default_value_t = 50.0)]
     budget_ms: f64,
-    /// Client cache, MB (MiB).
+    /// Client cache budget, MiB (2^20 bytes).
     #[arg(long, default_value_t = 64)]
     cache_mb: u64,
-    /// Image size WxH.
-    #[arg(long, default_value = "480x360")]
+    /// Image size WxH, pixels.
+    #[arg(long, default_value = values::SIZE)]
     size: String,
     /// Stop the walk after this many frames.
     #[arg(long, default_value_t = 600)]
@@ -60,18 +69,22 @@ pub struct Args {
 }
 
 /// Timings of the demo's steps.
-#[derive(Default)]
 struct Steps {
     lines: Vec<(String, f64)>,
+    /// How many steps the demo announces.
+    total: usize,
 }
 
 impl Steps {
-    fn time<T>(&mut self, name: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
+    /// Runs one step between a line that says what it does and one that says how long it took.
+    fn time<T>(&mut self, name: &str, what: &str, f: impl FnOnce() -> Result<T>) -> Result<T> {
         let t0 = Instant::now();
-        eprintln!("== {name}");
+        let n = self.lines.len() + 1;
+        eprintln!("[{n}/{}] {name}: {what}", self.total);
         let v = f()?;
-        self.lines
-            .push((name.to_string(), t0.elapsed().as_secs_f64()));
+        let s = t0.elapsed().as_secs_f64();
+        eprintln!("      {name} done in {s:.1} s");
+        self.lines.push((name.to_string(), s));
         Ok(v)
     }
 }
@@ -81,38 +94,71 @@ pub fn run(a: Args) -> Result<()> {
     let t0 = Instant::now();
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let out = a.out.canonicalize()?;
-    let mut steps = Steps::default();
+    let mut steps = Steps {
+        lines: Vec::new(),
+        total: if a.clients > 0 { 6 } else { 5 },
+    };
     let glb = out.join("building.glb");
     let db_path = out.join("building.portico");
-    steps.time("generate", || generate_building(&a, &glb))?;
-    steps.time("build", || build_database(&glb, &db_path))?;
+    steps.time("generate", "a furnished building as glTF", || {
+        generate_building(&a, &glb)
+    })?;
+    steps.time(
+        "build",
+        "LODs, cells and portals, visibility, impostors",
+        || build_database(&glb, &db_path),
+    )?;
     let state = AppState::open(&db_path, Config::default())?;
     let server = Server::start(state.clone())?;
-    eprintln!("serving on {}", server.url);
-    let path = steps.time("path", || tour(&db_path, &a, &out))?;
-    let walked = steps.time("walk", || walk_tour(&a, &server.url, &path, &out))?;
+    eprintln!("      serving it on {}", server.url);
+    let path = steps.time("path", "a tour through the rooms", || {
+        tour(&db_path, &a, &out)
+    })?;
+    let walked = steps.time(
+        "walk",
+        "the headless client walks the tour in real time, fetching as it goes",
+        || walk_tour(&a, &server.url, &path, &out),
+    )?;
     print_summary(&walked);
-    let pictures = steps.time("pictures", || pictures(&a, &db_path, &path, &out))?;
+    let pictures = steps.time("pictures", "contact sheet and bird's-eye view", || {
+        pictures(&a, &db_path, &path, &out)
+    })?;
     let load = match a.clients {
         0 => None,
-        n => Some(steps.time("loadtest", || loadtest(&a, n, &server.url, &path, &out))?),
+        n => Some(steps.time(
+            "loadtest",
+            &format!("{n} simulated clients: prefetch against demand fetch and an oracle"),
+            || loadtest(&a, n, &server.url, &path, &out),
+        )?),
     };
     server.stop();
+    let mut verdicts = portico_lab::verdict::walk(&walked);
+    if let Some((_, v)) = &load {
+        verdicts.extend(v.iter().cloned());
+    }
     let report = report(
         &a,
         &state,
-        &walked,
-        load.as_deref(),
-        &pictures,
-        &steps,
-        t0.elapsed().as_secs_f64(),
+        &Outcome {
+            w: &walked,
+            load: load.as_ref().map(|(s, _)| s.as_str()),
+            verdicts: &verdicts,
+            pics: &pictures,
+            steps: &steps,
+            total_s: t0.elapsed().as_secs_f64(),
+        },
     );
     std::fs::write(out.join("report.md"), report)?;
+    let met = verdicts.iter().filter(|v| v.met).count();
     eprintln!(
-        "\ndemo done in {:.1} s. Everything is in {}:",
+        "\ndemo done in {:.1} s: {met} of {} targets met.",
         t0.elapsed().as_secs_f64(),
-        out.display()
+        verdicts.len()
     );
+    for v in &verdicts {
+        eprintln!("  {v}");
+    }
+    eprintln!("Everything is in {}:", out.display());
     for f in [
         "report.md",
         "contact_sheet.png",
@@ -190,7 +236,8 @@ fn walk_tour(a: &Args, url: &str, path: &CameraPath, out: &Path) -> Result<WalkS
         elision: Algorithm::Optimize,
         policy: Policy::default(),
         out: Some(out.join("walk")),
-        png_every: (frames / 12).max(1),
+        // More frames than the sheet shows: it keeps twelve that differ.
+        png_every: (frames / 36).max(1),
         max_frames: Some(a.max_frames),
         pace: true,
         fovy: 60f32.to_radians(),
@@ -222,21 +269,39 @@ fn pictures(a: &Args, db: &Path, path: &CameraPath, out: &Path) -> Result<Pictur
         .iter()
         .filter_map(|p| image::open(p).ok().map(|i| i.to_rgba8()))
         .collect();
-    let sheet = match portico_render::sheet::contact_sheet(&images, 4, 240) {
+    // Twelve frames that differ (standing still or turning slowly repeats a frame).
+    let images = sheet::distinct(images, 12, 2.0);
+    let sheet = match sheet::contact_sheet(&images, 4, 240) {
         Some(s) => s.save(out.join("contact_sheet.png")).is_ok(),
         None => false,
     };
     let (w, h) = crate::cmd::walk::parse_size(&a.size)?;
     let mut r = Renderer::new(w * 2, h * 2)?;
     let db = Database::open(db)?;
-    let img = portico_render::sheet::birdseye(&mut r, &db, path)?;
+    let view = sheet::birdseye(&mut r, &db, path)?;
+    let srgb = |c: [f32; 4]| c.map(|v| (v.clamp(0.0, 1.0).powf(1.0 / 2.2) * 255.0).round() as u8);
+    let [p, s, e] = [sheet::PATH_COLOUR, sheet::START_COLOUR, sheet::END_COLOUR].map(|c| {
+        let [r, g, b, _] = srgb(c);
+        [r, g, b]
+    });
+    let img = portico_lab::picture::scale_and_legend(
+        &view.image,
+        view.metres_per_pixel,
+        &[(s, "start"), (p, "the path, every 0.5 s"), (e, "end")],
+    )?;
     let birdseye = img.save(out.join("birdseye.png")).is_ok();
     Ok(Pictures { sheet, birdseye })
 }
 
 /// A short load test of the default prefetch policy against demand fetch and the oracle, on
-/// the walked path; returns its summary as a Markdown section for the report.
-fn loadtest(a: &Args, clients: usize, url: &str, path: &CameraPath, out: &Path) -> Result<String> {
+/// the walked path; returns its summary as a Markdown section for the report, and its verdicts.
+fn loadtest(
+    a: &Args,
+    clients: usize,
+    url: &str,
+    path: &CameraPath,
+    out: &Path,
+) -> Result<(String, Vec<Verdict>)> {
     let policy = Policy::default();
     let cfg = LoadtestConfig {
         server: url.to_string(),
@@ -266,7 +331,7 @@ fn loadtest(a: &Args, clients: usize, url: &str, path: &CameraPath, out: &Path) 
     })?;
     bars.finish();
     crate::cmd::loadtest::print_summary(&s, &cfg.out);
-    Ok(loadtest_section(&s))
+    Ok((loadtest_section(&s), portico_lab::verdict::loadtest(&s)))
 }
 
 /// The load test's headline table: one row per run, and prefetch against demand fetch.
@@ -274,7 +339,7 @@ fn loadtest_section(s: &LoadtestSummary) -> String {
     let mut r = String::new();
     let _ = writeln!(
         r,
-        "{} simulated clients x {} frames on the walked path, link {}, cache {} MB each \
+        "{} simulated clients x {} frames on the walked path, link {}, cache {} MiB each \
          (full report: `loadtest/report.md`).\n",
         s.clients,
         s.frames_per_client,
@@ -346,15 +411,26 @@ impl Server {
     }
 }
 
-fn report(
-    a: &Args,
-    state: &AppState,
-    w: &WalkSummary,
-    load: Option<&str>,
-    pics: &Pictures,
-    steps: &Steps,
+/// What the report tells.
+struct Outcome<'a> {
+    w: &'a WalkSummary,
+    /// The load test's section, if it ran.
+    load: Option<&'a str>,
+    verdicts: &'a [Verdict],
+    pics: &'a Pictures,
+    steps: &'a Steps,
     total_s: f64,
-) -> String {
+}
+
+fn report(a: &Args, state: &AppState, o: &Outcome<'_>) -> String {
+    let Outcome {
+        w,
+        load,
+        verdicts,
+        pics,
+        steps,
+        total_s,
+    } = *o;
     let ms = |x: f64| x * 1e3;
     let db = state.db();
     let mut r = String::new();
@@ -369,7 +445,14 @@ fn report(
         "Generated, built, served on loopback, walked with the headless wgpu client ({}), in {:.1} s.\n",
         w.adapter, total_s
     );
-    let _ = writeln!(r, "| step | seconds |\n|---|---|");
+    let met = verdicts.iter().filter(|v| v.met).count();
+    let _ = writeln!(
+        r,
+        "## Verdicts: {met} of {} targets met\n\n{}",
+        verdicts.len(),
+        portico_lab::verdict::table(verdicts)
+    );
+    let _ = writeln!(r, "## Steps\n\n| step | seconds |\n|---|---|");
     for (name, s) in &steps.lines {
         let _ = writeln!(r, "| {name} | {s:.2} |");
     }
@@ -386,7 +469,7 @@ fn report(
     );
     let _ = writeln!(
         r,
-        "## Walk ({} frames, budget {:.0} ms, cache {} MB, elision {})\n",
+        "## Walk ({} frames, budget {:.0} ms, cache {} MiB, elision {})\n",
         w.frames,
         ms(w.budget_s),
         a.cache_mb,
@@ -417,11 +500,11 @@ fn report(
     }
     let _ = writeln!(
         r,
-        "\nFrames over budget: {}. Drawn per frame: {:.3} % of the model's triangles. Cache peak {:.1} MB of {:.1} MB; {} segments ({:.1} MB) read, {} released.\n",
+        "\nFrames over budget: {}. Drawn per frame: {:.3} % of the model's triangles. Cache peak {:.1} of {:.1} MiB; {} segments ({:.1} MB) read, {} released.\n",
         w.frames_over_budget,
         w.drawn_fraction * 100.0,
-        w.cache_peak_bytes as f64 / 1e6,
-        w.cache_budget as f64 / 1e6,
+        w.cache_peak_bytes as f64 / crate::cmd::walk::MIB,
+        w.cache_budget as f64 / crate::cmd::walk::MIB,
         w.segments_read,
         w.bytes_read as f64 / 1e6,
         w.evictions
@@ -436,7 +519,7 @@ fn report(
     if pics.birdseye {
         let _ = writeln!(
             r,
-            "## Bird's-eye view of the first storey walked, path in red\n\n![birdseye](birdseye.png)\n"
+            "## Bird's-eye view of the first storey walked\n\nSeen from above with everything over eye height left out; the path is marked every half second from the green start to the blue end, and the bar in the lower left gives the scale.\n\n![birdseye](birdseye.png)\n"
         );
     }
     if let Some(l) = load.filter(|l| !l.is_empty()) {

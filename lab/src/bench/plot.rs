@@ -214,5 +214,9 @@ mod tests {
                 assert_eq!((img.width(), img.height()), SIZE);
             }
         }
+        assert!(
+            fonts_available() || std::env::var_os("CI").is_none(),
+            "no font for the plots' text: install fonts-dejavu-core"
+        );
     }
 }

@@ -52,7 +52,7 @@ pub fn write_all(out: &Path, s: &LoadtestSummary) -> Result<Plots> {
         .collect();
     if !s.visible_mb_client0.is_empty() {
         look.push((
-            "0 frames (visible now)".into(),
+            "visible from the eye now (no lookahead)".into(),
             s.visible_mb_client0.clone(),
         ));
     }
@@ -114,6 +114,8 @@ pub fn lines(path: &Path, title: &str, y_desc: &str, series: &[Line], text: bool
         .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max);
     let top = if top > 0.0 { top * 1.1 } else { 1.0 };
+    // Start a little below zero, so lines at zero are not hidden by the axis.
+    let bottom = -0.04 * top;
     let mut builder = ChartBuilder::on(&root);
     builder.margin(16);
     if text {
@@ -123,7 +125,7 @@ pub fn lines(path: &Path, title: &str, y_desc: &str, series: &[Line], text: bool
             .y_label_area_size(64);
     }
     let mut chart = builder
-        .build_cartesian_2d(0f64..(frames - 1) as f64, 0f64..top)
+        .build_cartesian_2d(0f64..(frames - 1) as f64, bottom..top)
         .map_err(|e| err(&e))?;
     let mut mesh = chart.configure_mesh();
     if text {
@@ -132,18 +134,24 @@ pub fn lines(path: &Path, title: &str, y_desc: &str, series: &[Line], text: bool
         mesh.x_labels(0).y_labels(0);
     }
     mesh.draw().map_err(|e| err(&e))?;
+    // Earlier lines are drawn wider, so where lines coincide (at zero, typically) every
+    // colour still shows as a stripe; the legend gives each line's mean and maximum.
+    let n = series.len();
     for (i, (name, ys)) in series.iter().enumerate() {
         let color = PALETTE[(i + 1) % PALETTE.len()].to_rgba();
+        let width = 1 + 2 * (n - 1 - i) as u32;
         let drawn = chart
             .draw_series(LineSeries::new(
                 peaks(ys, PEAK_BUCKETS),
-                color.stroke_width(1),
+                color.stroke_width(width),
             ))
             .map_err(|e| err(&e))?;
         if text {
-            drawn
-                .label(name.as_str())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+            let s = portico_client::stats::Series::of(ys);
+            let label = format!("{name}: mean {:.2}, max {:.2}", s.mean, s.max);
+            drawn.label(label).legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(width))
+            });
         }
     }
     if text && !series.is_empty() {
@@ -190,6 +198,11 @@ mod tests {
             let p = dir.path().join("text.png");
             lines(&p, "title", "y", &series, true).unwrap();
             assert!(image::open(&p).is_ok());
+        } else {
+            assert!(
+                std::env::var_os("CI").is_none(),
+                "no font for the plots' text: install fonts-dejavu-core"
+            );
         }
         // Empty and flat series still draw.
         lines(&dir.path().join("empty.png"), "t", "y", &[], false).unwrap();
