@@ -21,11 +21,14 @@ pub(crate) struct InstanceData {
     pub(crate) color: [f32; 4],
 }
 
-/// The offscreen targets and the buffer frames are read back through.
+/// The offscreen targets and the buffer frames are read back through: frames are drawn into
+/// multisampled colour and depth (`samples` per pixel) and resolved into `color`.
 #[derive(Debug)]
 pub(crate) struct Targets {
     pub(crate) color: wgpu::Texture,
     pub(crate) color_view: wgpu::TextureView,
+    /// The multisampled colour target; `None` with one sample per pixel.
+    pub(crate) msaa_view: Option<wgpu::TextureView>,
     pub(crate) depth_view: wgpu::TextureView,
     pub(crate) readback: wgpu::Buffer,
     pub(crate) padded_row: u32,
@@ -35,17 +38,18 @@ pub(crate) fn create_targets(
     device: &wgpu::Device,
     width: u32,
     height: u32,
+    samples: u32,
 ) -> Result<Targets, RenderError> {
     let max = device.limits().max_texture_dimension_2d;
     if width == 0 || height == 0 || width > max || height > max {
         return Err(RenderError::BadSize(width, height));
     }
-    let texture = |label, format, usage| {
+    let texture = |label, format, usage, sample_count| {
         device.create_texture(&wgpu::TextureDescriptor {
             label: Some(label),
             size: extent(width, height),
             mip_level_count: 1,
-            sample_count: 1,
+            sample_count,
             dimension: wgpu::TextureDimension::D2,
             format,
             usage,
@@ -56,11 +60,21 @@ pub(crate) fn create_targets(
         "colour",
         COLOR_FORMAT,
         wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+        1,
     );
+    let msaa = (samples > 1).then(|| {
+        texture(
+            "colour samples",
+            COLOR_FORMAT,
+            wgpu::TextureUsages::RENDER_ATTACHMENT,
+            samples,
+        )
+    });
     let depth = texture(
         "depth",
         DEPTH_FORMAT,
         wgpu::TextureUsages::RENDER_ATTACHMENT,
+        samples,
     );
     let padded_row = (width * 4).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
     let readback = device.create_buffer(&wgpu::BufferDescriptor {
@@ -71,6 +85,7 @@ pub(crate) fn create_targets(
     });
     Ok(Targets {
         color_view: color.create_view(&Default::default()),
+        msaa_view: msaa.map(|m| m.create_view(&Default::default())),
         depth_view: depth.create_view(&Default::default()),
         color,
         readback,
@@ -129,6 +144,7 @@ pub(crate) fn vertex_layouts() -> [Option<wgpu::VertexBufferLayout<'static>>; 2]
 pub(crate) fn create_pipeline(
     device: &wgpu::Device,
     globals: &wgpu::BindGroupLayout,
+    samples: u32,
 ) -> wgpu::RenderPipeline {
     let shader = device.create_shader_module(wgpu::include_wgsl!("shader.wgsl"));
     let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -137,12 +153,20 @@ pub(crate) fn create_pipeline(
         immediate_size: 0,
     });
     let buffers = vertex_layouts();
-    opaque_pipeline(device, "walkthrough", &layout, &shader, &buffers, None)
+    opaque_pipeline(
+        device,
+        "walkthrough",
+        &layout,
+        &shader,
+        &buffers,
+        None,
+        samples,
+    )
 }
 
 /// A pipeline of depth-tested opaque triangles from `shader`'s `vs_main` and `fs_main` into the
 /// one colour target (the walkthrough's and the impostor boxes' alike); `cull_mode` as the
-/// geometry's winding allows.
+/// geometry's winding allows; `samples` per pixel as the targets have.
 pub(crate) fn opaque_pipeline(
     device: &wgpu::Device,
     label: &str,
@@ -150,6 +174,7 @@ pub(crate) fn opaque_pipeline(
     shader: &wgpu::ShaderModule,
     buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
     cull_mode: Option<wgpu::Face>,
+    samples: u32,
 ) -> wgpu::RenderPipeline {
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(label),
@@ -171,7 +196,10 @@ pub(crate) fn opaque_pipeline(
             stencil: Default::default(),
             bias: Default::default(),
         }),
-        multisample: Default::default(),
+        multisample: wgpu::MultisampleState {
+            count: samples,
+            ..Default::default()
+        },
         fragment: Some(wgpu::FragmentState {
             module: shader,
             entry_point: Some("fs_main"),

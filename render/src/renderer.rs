@@ -33,12 +33,23 @@ pub struct Renderer {
     pub(crate) has_frame: bool,
     pub(crate) textured: Arc<textured::Textured>,
     pub(crate) clear: wgpu::Color,
+    pub(crate) samples: u32,
 }
 
 impl Renderer {
     /// Creates a device on the default adapter (or the one `WGPU_BACKEND` / `WGPU_ADAPTER_NAME`
-    /// select) with offscreen targets of `width` x `height` pixels.
+    /// select) with offscreen targets of `width` x `height` pixels, [`crate::SAMPLES`] per pixel
+    /// on a GPU and one on a CPU rasteriser unless `PORTICO_MSAA` (1 or 4) says otherwise.
     pub fn new(width: u32, height: u32) -> Result<Renderer, RenderError> {
+        Self::with_samples(width, height, None)
+    }
+
+    /// As [`Renderer::new`] with `samples` per pixel (1 or 4; `None`: the adapter's default).
+    pub fn with_samples(
+        width: u32,
+        height: u32,
+        samples: Option<u32>,
+    ) -> Result<Renderer, RenderError> {
         let instance =
             wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle().with_env());
         let adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
@@ -50,8 +61,14 @@ impl Renderer {
                 required_limits: adapter.limits(),
                 ..Default::default()
             }))?;
+        let info = adapter.get_info();
+        let samples = match samples.or_else(msaa_from_env) {
+            Some(n) => n,
+            None if info.device_type == wgpu::DeviceType::Cpu => 1,
+            None => crate::SAMPLES,
+        };
         let layout = globals_layout(&device);
-        let pipeline = create_pipeline(&device, &layout);
+        let pipeline = create_pipeline(&device, &layout, samples);
         let globals = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("globals"),
             size: std::mem::size_of::<Globals>() as u64,
@@ -67,10 +84,9 @@ impl Renderer {
             }],
         });
         let instances = create_instance_buffer(&device, INITIAL_INSTANCES);
-        let targets = create_targets(&device, width, height)?;
-        let textured = Arc::new(textured::Textured::new(&device, &layout));
-        let info = adapter.get_info();
-        tracing::info!(adapter = %info.name, backend = ?info.backend, width, height, "renderer ready");
+        let targets = create_targets(&device, width, height, samples)?;
+        let textured = Arc::new(textured::Textured::new(&device, &layout, samples));
+        tracing::info!(adapter = %info.name, backend = ?info.backend, width, height, samples, "renderer ready");
         Ok(Renderer {
             _instance: instance,
             info,
@@ -88,6 +104,7 @@ impl Renderer {
             has_frame: false,
             textured,
             clear: SKY_COLOR,
+            samples,
         })
     }
 
@@ -107,12 +124,19 @@ impl Renderer {
         self.uploader().upload_impostor(png, bounds, tile)
     }
 
-    /// A one-line description of the adapter, e.g. `Gl Cpu 'llvmpipe (LLVM 15.0.6, 256 bits)' ...`.
+    /// Samples per pixel (1, or 4 with MSAA).
+    pub fn samples(&self) -> u32 {
+        self.samples
+    }
+
+    /// A one-line description of the adapter and the samples per pixel, e.g.
+    /// `Gl Cpu 'llvmpipe (LLVM 15.0.6, 256 bits)' ..., 1 sample per pixel`.
     pub fn adapter_info(&self) -> String {
         let i = &self.info;
+        let s = if self.samples == 1 { "" } else { "s" };
         format!(
-            "{:?} {:?} '{}' driver='{}' '{}'",
-            i.backend, i.device_type, i.name, i.driver, i.driver_info
+            "{:?} {:?} '{}' driver='{}' '{}', {} sample{s} per pixel",
+            i.backend, i.device_type, i.name, i.driver, i.driver_info, self.samples
         )
     }
 
@@ -133,7 +157,7 @@ impl Renderer {
 
     /// Recreates the offscreen targets at a new size (the last frame is discarded).
     pub fn resize(&mut self, width: u32, height: u32) -> Result<(), RenderError> {
-        self.targets = create_targets(&self.device, width, height)?;
+        self.targets = create_targets(&self.device, width, height, self.samples)?;
         self.width = width;
         self.height = height;
         self.has_frame = false;
@@ -334,12 +358,24 @@ impl Renderer {
         encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("frame"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: &self.targets.color_view,
+                view: self
+                    .targets
+                    .msaa_view
+                    .as_ref()
+                    .unwrap_or(&self.targets.color_view),
                 depth_slice: None,
-                resolve_target: None,
+                resolve_target: self
+                    .targets
+                    .msaa_view
+                    .as_ref()
+                    .map(|_| &self.targets.color_view),
                 ops: wgpu::Operations {
                     load: wgpu::LoadOp::Clear(self.clear),
-                    store: wgpu::StoreOp::Store,
+                    store: if self.targets.msaa_view.is_some() {
+                        wgpu::StoreOp::Discard
+                    } else {
+                        wgpu::StoreOp::Store
+                    },
                 },
             })],
             depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
@@ -434,5 +470,18 @@ pub(crate) fn extent(width: u32, height: u32) -> wgpu::Extent3d {
         width,
         height,
         depth_or_array_layers: 1,
+    }
+}
+
+/// `PORTICO_MSAA` as a sample count: 1 or 4; anything else is ignored with a warning.
+fn msaa_from_env() -> Option<u32> {
+    let v = std::env::var("PORTICO_MSAA").ok()?;
+    match v.trim() {
+        "1" => Some(1),
+        "4" => Some(4),
+        other => {
+            tracing::warn!("PORTICO_MSAA={other} ignored: samples per pixel are 1 or 4");
+            None
+        }
     }
 }

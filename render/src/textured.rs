@@ -43,8 +43,9 @@ pub struct Textured {
 }
 
 impl Textured {
-    /// Creates the pipeline; `globals` is the walkthrough pipeline's group 0 layout.
-    pub fn new(device: &wgpu::Device, globals: &wgpu::BindGroupLayout) -> Textured {
+    /// Creates the pipeline; `globals` is the walkthrough pipeline's group 0 layout, `samples`
+    /// the targets' samples per pixel.
+    pub fn new(device: &wgpu::Device, globals: &wgpu::BindGroupLayout, samples: u32) -> Textured {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("impostor atlas"),
             entries: &[
@@ -96,6 +97,7 @@ impl Textured {
             &shader,
             &buffers,
             Some(wgpu::Face::Back),
+            samples,
         );
         Textured {
             pipeline,
