@@ -228,13 +228,18 @@ pub fn print_summary(s: &LoadtestSummary, out: &std::path::Path) {
             p.latency_p99_s * 1e3
         );
     }
-    if let (Some(best), Some(_)) = (s.best_prefetch(), s.get("demand")) {
-        let ratio = |r: Option<f64>| r.map_or("inf".into(), |r| format!("{r:.1}x"));
+    if let (Some(best), Some(demand)) = (s.best_prefetch(), s.get("demand")) {
+        let fewer = best
+            .lods_skipped_vs_demand
+            .map_or("none skipped".into(), |r| format!("{r:.1}x fewer"));
+        let deficit = best
+            .lod_deficit_vs_demand
+            .map_or("no LOD deficit".into(), |r| {
+                format!("LOD deficit {r:.1}x smaller")
+            });
         println!(
-            "  best prefetch `{}`: {} fewer LODs skipped than demand fetch ({} smaller LOD deficit)",
-            best.name,
-            ratio(best.lods_skipped_vs_demand),
-            ratio(best.lod_deficit_vs_demand)
+            "  best prefetch `{}`: LODs skipped per frame {:.3} against demand fetch's {:.3} ({fewer}; {deficit})",
+            best.name, best.lods_skipped_mean, demand.lods_skipped_mean
         );
     }
     for v in portico_lab::verdict::loadtest(s) {

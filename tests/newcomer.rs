@@ -1,0 +1,210 @@
+//! What a newcomer meets first: every command's help lists the values it accepts and spells the
+//! output flag the same way; the mistakes of a first hour (serving a model instead of a
+//! database, walking with no server running) give one line that says what to do; the demo's
+//! report judges every figure against its target.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn portico(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_portico"))
+        .args(args)
+        .output()
+        .expect("run portico")
+}
+
+fn help(command: &str) -> String {
+    let out = portico(&[command, "--help"]);
+    assert!(out.status.success(), "portico {command} --help failed");
+    String::from_utf8(out.stdout).expect("utf-8")
+}
+
+/// Runs a command that must fail; returns its stderr (checked to be one `error:` line).
+fn fails(args: &[&str]) -> String {
+    let out = portico(args);
+    assert!(!out.status.success(), "portico {args:?} should fail");
+    let err = String::from_utf8_lossy(&out.stderr).trim().to_string();
+    let last = err.lines().last().unwrap_or_default().to_string();
+    assert!(last.starts_with("error: "), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(
+        err.lines().filter(|l| l.starts_with("error")).count(),
+        1,
+        "not one error line: {err}"
+    );
+    last
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+#[test]
+fn every_command_lists_the_values_it_accepts() {
+    let presets = ["tiny", "small", "soda", "mega"];
+    let paths = ["tour", "spin", "revisit", "orbit", "flythrough"];
+    let elision = ["none", "static", "feedback", "optimize", "impostors"];
+    let runs = [
+        "regular",
+        "none",
+        "static",
+        "feedback",
+        "optimize",
+        "impostors",
+        "coarsest",
+    ];
+    let policy = [
+        "depth=", "gran=", "object", "cell", "range=", "look=", "frustum", "imp=",
+    ];
+    let sweeps = ["reduced", "full", "depth", "gran", "cull"];
+    let cases: [(&str, Vec<&str>); 7] = [
+        ("generate", presets.to_vec()),
+        ("demo", presets.to_vec()),
+        ("path", paths.to_vec()),
+        ("walk", [&paths[..], &elision[..], &policy[..]].concat()),
+        ("bench", [&paths[..], &runs[..]].concat()),
+        ("loadtest", [&paths[..], &policy[..], &sweeps[..]].concat()),
+        ("inspect", vec!["--verify", "--json"]),
+    ];
+    for (command, values) in cases {
+        let text = help(command);
+        for v in values {
+            assert!(
+                text.contains(v),
+                "`portico {command} --help` does not list `{v}`"
+            );
+        }
+    }
+}
+
+#[test]
+fn every_command_that_writes_spells_its_output_flag_the_same() {
+    for command in [
+        "generate", "build", "path", "walk", "loadtest", "bench", "demo",
+    ] {
+        let text = help(command);
+        assert!(
+            text.contains("-o, --out"),
+            "`portico {command} --help` has no `-o, --out`"
+        );
+        assert!(
+            text.contains("aliases: --output") || text.contains("alias: --output"),
+            "`portico {command} --help` does not accept `--output`"
+        );
+    }
+}
+
+#[test]
+fn defaults_agree_across_commands() {
+    for command in ["walk", "bench", "demo"] {
+        assert!(
+            help(command).contains("[default: 640x480]"),
+            "`portico {command}` has another default image size"
+        );
+    }
+    for command in ["path", "walk", "bench", "loadtest", "demo"] {
+        assert!(
+            help(command).contains("[default: 4]"),
+            "`portico {command}` has another default leg count"
+        );
+    }
+}
+
+#[test]
+fn a_model_where_a_database_belongs_names_the_build_command() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let glb = dir.path().join("house.glb");
+    let mut bytes = b"glTF".to_vec();
+    bytes.extend_from_slice(&2u32.to_le_bytes());
+    bytes.extend_from_slice(&[0; 64]);
+    std::fs::write(&glb, bytes).expect("write");
+    for args in [vec!["serve", s(&glb)], vec!["inspect", s(&glb)]] {
+        let err = fails(&args);
+        assert!(err.contains("house.glb"), "{err}");
+        assert!(err.contains("GLB model"), "{err}");
+        assert!(err.contains("portico build"), "{err}");
+    }
+}
+
+#[test]
+fn walking_with_no_server_says_so_in_one_line() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    // Port 9 (discard) is closed on test machines: the connection is refused at once.
+    let err = fails(&[
+        "walk",
+        "--server",
+        "http://127.0.0.1:9",
+        "--max-frames",
+        "1",
+        "-o",
+        s(&dir.path().join("w")),
+    ]);
+    assert!(err.contains("cannot connect"), "{err}");
+    assert!(err.contains("portico serve"), "{err}");
+    assert!(err.len() < 300, "{err}");
+}
+
+#[test]
+fn the_demo_judges_every_figure_against_its_target() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join("demo");
+    let run = portico(&[
+        "demo",
+        "--preset",
+        "tiny",
+        "--max-frames",
+        "40",
+        "--clients",
+        "2",
+        "--loadtest-frames",
+        "40",
+        "-o",
+        s(&out),
+    ]);
+    let said = format!(
+        "{}{}",
+        String::from_utf8_lossy(&run.stdout),
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(run.status.success(), "demo failed: {said}");
+    let report = std::fs::read_to_string(out.join("report.md")).expect("report.md");
+    let targets = [
+        "frame time p99",
+        "frames over budget",
+        "LODs skipped per frame",
+        "objects skipped per frame",
+        "cache peak",
+        "IO failures",
+        "LODs skipped per frame, prefetch vs demand fetch",
+        "objects skipped per frame, prefetch",
+        "first complete frame, prefetch",
+        "request-to-resident latency p50, prefetch",
+        "bytes fetched, prefetch",
+    ];
+    let rows: Vec<&str> = report
+        .lines()
+        .filter(|l| l.contains("| **met** |") || l.contains("| **not met** |"))
+        .collect();
+    assert_eq!(rows.len(), targets.len(), "verdict rows: {rows:#?}");
+    for t in targets {
+        assert!(
+            rows.iter().any(|r| r.starts_with(&format!("| {t} |"))),
+            "no verdict for `{t}` in report.md"
+        );
+    }
+    let met = rows.iter().filter(|r| r.contains("| **met** |")).count();
+    assert!(
+        report.contains(&format!(
+            "## Verdicts: {met} of {} targets met",
+            targets.len()
+        )),
+        "the heading does not count the verdicts"
+    );
+    // Every step is announced and the closing summary repeats the verdicts.
+    for step in ["[1/6] generate", "[6/6] loadtest", "demo done in"] {
+        assert!(said.contains(step), "the demo does not say `{step}`");
+    }
+    for picture in ["contact_sheet.png", "birdseye.png"] {
+        assert!(out.join(picture).is_file(), "{picture} missing");
+    }
+}
