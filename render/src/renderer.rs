@@ -251,6 +251,51 @@ impl Renderer {
             .ok_or_else(|| RenderError::Readback("pixel buffer has the wrong size".into()))
     }
 
+    /// A picture of `draws` and `boxes` from `camera` for people to look at (saved frames,
+    /// contact sheets). With one sample per pixel (a CPU rasteriser) it is drawn at twice the
+    /// width and height and filtered down — four samples per pixel, as MSAA gives on a GPU, so
+    /// faces thinner than a pixel do not break into dashes; with MSAA it is the frame as drawn.
+    /// It costs up to four frames' fill, so timed frames never use it. The targets keep the last
+    /// timed frame.
+    pub fn picture_with_boxes(
+        &mut self,
+        camera: &Camera,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+    ) -> Result<image::RgbaImage, RenderError> {
+        self.picture_view_proj(camera.view_proj(self.aspect()), draws, boxes)
+    }
+
+    /// [`Renderer::picture_with_boxes`] with an explicit world-to-clip matrix.
+    pub fn picture_view_proj(
+        &mut self,
+        view_proj: Mat4,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+    ) -> Result<image::RgbaImage, RenderError> {
+        let (w, h) = (self.width, self.height);
+        let max = self.device.limits().max_texture_dimension_2d;
+        if self.samples > 1 || w * 2 > max || h * 2 > max {
+            self.render_frame(view_proj, draws, boxes)?;
+            return self.read_pixels();
+        }
+        let big = create_targets(&self.device, w * 2, h * 2, 1)?;
+        let frame = std::mem::replace(&mut self.targets, big);
+        let had_frame = self.has_frame;
+        (self.width, self.height) = (w * 2, h * 2);
+        let picture = self
+            .render_frame(view_proj, draws, boxes)
+            .and_then(|_| self.read_pixels());
+        self.targets = frame;
+        (self.width, self.height, self.has_frame) = (w, h, had_frame);
+        Ok(image::imageops::resize(
+            &picture?,
+            w,
+            h,
+            image::imageops::FilterType::Triangle,
+        ))
+    }
+
     /// Renders a frame and reads it back.
     pub fn render_to_image(
         &mut self,

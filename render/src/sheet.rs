@@ -154,9 +154,9 @@ pub fn birdseye(r: &mut Renderer, db: &Database, path: &CameraPath) -> Result<Bi
         color: *c,
     }));
     let (view_proj, half_w) = top_down(db, cut, r.aspect());
-    r.render_view_proj(view_proj, &draws)
+    let image = r
+        .picture_view_proj(view_proj, &draws, &[])
         .context("bird's-eye render")?;
-    let image = r.read_pixels()?;
     let metres_per_pixel = 2.0 * half_w / image.width().max(1) as f32;
     Ok(Birdseye {
         image,

@@ -168,12 +168,16 @@ pub fn walk(cfg: &WalkConfig, on_frame: &mut dyn FnMut(u64, u64)) -> Result<Walk
         let t0 = Instant::now();
         let t = frame as f64 * dt;
         let obs = session.path_observer(t);
+        let png = cfg.png_every > 0 && frame % cfg.png_every == 0;
+        if png {
+            session.want_picture();
+        }
         if let Err(e) = session.frame(t, &obs) {
             outcome = Err(e);
             break;
         }
         on_frame(frame + 1, total);
-        if cfg.png_every > 0 && frame % cfg.png_every == 0 {
+        if png {
             session.save_png(frame)?;
         }
         if cfg.pace {

@@ -88,7 +88,7 @@ impl<'a> Session<'a> {
         };
         self.walker.take_arrivals(io, &mut row);
         self.walker.frame(&mut self.renderer, obs, &mut row)?;
-        row.frame_s = t0.elapsed().as_secs_f64();
+        row.frame_s = (t0.elapsed().as_secs_f64() - self.walker.picture_s).max(0.0);
         self.walker.last_frame_s = Some(row.frame_s);
         self.walker.online.observe(row.predicted_s, row.render_s);
         self.walker.publish(io, *obs);
@@ -101,7 +101,14 @@ impl<'a> Session<'a> {
         Ok(self.renderer.read_pixels()?)
     }
 
-    /// Saves the last frame as `OUT/frames/frame_NNNNN.png` (when there is an output directory).
+    /// Draws the next frame a second time as a picture for [`Session::save_png`] (antialiased
+    /// even on a CPU rasteriser; the time it takes is not part of the frame time).
+    pub fn want_picture(&mut self) {
+        self.walker.want_picture = true;
+    }
+
+    /// Saves the last frame as `OUT/frames/frame_NNNNN.png` (when there is an output directory):
+    /// its picture when [`Session::want_picture`] asked for one, else the frame as drawn.
     pub fn save_png(&mut self, frame: u64) -> Result<()> {
         self.walker.save_png(&mut self.renderer, frame)
     }

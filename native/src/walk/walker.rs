@@ -39,6 +39,12 @@ pub(super) struct Walker<'a> {
     segments_read: u64,
     bytes_read: u64,
     pub(super) last_frame_s: Option<f64>,
+    /// Whether the next frame is also drawn as a picture ([`Renderer::picture_with_boxes`]).
+    pub(super) want_picture: bool,
+    /// The last picture, until it is saved.
+    picture: Option<image::RgbaImage>,
+    /// Seconds the last frame spent drawing its picture (not part of its frame time).
+    pub(super) picture_s: f64,
 }
 
 impl<'a> Walker<'a> {
@@ -63,6 +69,9 @@ impl<'a> Walker<'a> {
             segments_read: 0,
             bytes_read: 0,
             last_frame_s: None,
+            want_picture: false,
+            picture: None,
+            picture_s: 0.0,
         }
     }
 
@@ -188,6 +197,12 @@ impl<'a> Walker<'a> {
         row.render_s = timing.total_s;
         row.drawn_objects = timing.draws;
         row.drawn_triangles = timing.triangles;
+        self.picture_s = 0.0;
+        if std::mem::take(&mut self.want_picture) {
+            let t = std::time::Instant::now();
+            self.picture = Some(r.picture_with_boxes(&view.camera, &draws, &textured)?);
+            self.picture_s = t.elapsed().as_secs_f64();
+        }
         for &s in &d.touched {
             self.cache.touch(s);
         }
@@ -210,11 +225,14 @@ impl<'a> Walker<'a> {
         }));
     }
 
-    pub(super) fn save_png(&self, r: &mut Renderer, frame: u64) -> Result<()> {
+    pub(super) fn save_png(&mut self, r: &mut Renderer, frame: u64) -> Result<()> {
         let Some(out) = &self.cfg.out else {
             return Ok(());
         };
-        let img = r.read_pixels()?;
+        let img = match self.picture.take() {
+            Some(picture) => picture,
+            None => r.read_pixels()?,
+        };
         let p = out.join("frames").join(format!("frame_{frame:05}.png"));
         img.save(&p)
             .with_context(|| format!("writing {}", p.display()))
