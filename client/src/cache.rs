@@ -6,6 +6,15 @@
 
 use lru::LruCache;
 
+/// Splits a client's byte budget between the cache and the IO stage: `(cache, window)`, where
+/// `window` (an eighth) bounds the segments in flight or delivered and waiting to be taken
+/// ([`crate::schedule::Schedule::with_window`]). They are held outside the cache, so with this
+/// split the two together never exceed the budget.
+pub fn split_budget(budget: u64) -> (u64, u64) {
+    let window = budget / 8;
+    (budget - window, window)
+}
+
 /// A byte-budgeted LRU of values keyed by segment id. `V` is a GPU mesh in the client and a
 /// plain size in the load tester; dropping an evicted value frees its memory.
 #[derive(Debug)]

@@ -36,9 +36,35 @@ pub struct Schedule {
     inflight: HashSet<u32>,
     /// Failed, with the time it may be asked for again.
     failed: HashMap<u32, Instant>,
+    /// Most bytes in flight or delivered and not yet taken (`None`: no limit).
+    window: Option<u64>,
+    /// Bytes of each segment in flight or delivered and not yet taken, and their sum.
+    outstanding: HashMap<u32, u64>,
+    outstanding_bytes: u64,
 }
 
 impl Schedule {
+    /// A schedule that keeps at most `window` bytes in flight or delivered and not yet taken
+    /// (one segment alone may exceed it): what the IO stage holds outside the cache stays
+    /// bounded however small the cache is.
+    pub fn with_window(window: u64) -> Schedule {
+        Schedule {
+            window: Some(window),
+            ..Schedule::default()
+        }
+    }
+
+    /// Bytes in flight or delivered and not yet taken.
+    pub fn outstanding_bytes(&self) -> u64 {
+        self.outstanding_bytes
+    }
+
+    fn settle(&mut self, id: u32) {
+        if let Some(b) = self.outstanding.remove(&id) {
+            self.outstanding_bytes -= b;
+        }
+    }
+
     /// A new need list, most urgent first, replacing the last one.
     pub fn refresh(&mut self, wants: Vec<u32>, at: Instant) {
         self.failed.retain(|_, t| *t > at);
@@ -60,6 +86,7 @@ impl Schedule {
     pub fn acknowledge(&mut self, consumed: u64, answers: bool) {
         let next_ask = self.asks + 1;
         let taken = &mut self.taken;
+        let mut settled = Vec::new();
         self.delivered.retain(|&id, s| {
             if *s > consumed {
                 return true;
@@ -67,8 +94,12 @@ impl Schedule {
             if answers {
                 taken.insert(id, next_ask);
             }
+            settled.push(id);
             false
         });
+        for id in settled {
+            self.settle(id);
+        }
     }
 
     /// A prefetch request is being sent; returns its number.
@@ -130,13 +161,15 @@ impl Schedule {
             }
             Err(()) => {
                 self.failed.insert(id, now + RETRY_AFTER);
+                self.settle(id);
             }
         }
         self.listed.remove(&id).unwrap_or(now)
     }
 
     /// The next read request: the most urgent wanted segments, up to [`BATCH_ITEMS`] and
-    /// [`BATCH_BYTES`] (at least one); `bytes` gives a segment's size.
+    /// [`BATCH_BYTES`] (at least one) and within the window (a segment alone when nothing is
+    /// outstanding); `bytes` gives a segment's size.
     pub fn next_batch(&mut self, now: Instant, bytes: impl Fn(u32) -> u64) -> Vec<u32> {
         let mut ids = Vec::new();
         let mut total = 0u64;
@@ -146,9 +179,21 @@ impl Schedule {
             if !ids.is_empty() && total + b > BATCH_BYTES {
                 break;
             }
+            let alone = ids.is_empty() && self.outstanding_bytes == 0;
+            if self
+                .window
+                .is_some_and(|w| self.outstanding_bytes + total + b > w && !alone)
+            {
+                break;
+            }
             self.take(id);
             total += b;
             ids.push(id);
+        }
+        for &id in &ids {
+            let b = bytes(id);
+            self.outstanding.insert(id, b);
+            self.outstanding_bytes += b;
         }
         ids
     }
@@ -201,6 +246,36 @@ mod tests {
         s.refresh(vec![5], t0);
         assert_eq!(s.next(t0), Some(5), "evicted and wanted again");
         let _ = first;
+    }
+
+    #[test]
+    fn the_window_bounds_what_is_in_flight_or_waiting_to_be_taken() {
+        let t0 = Instant::now();
+        let size = |id: u32| u64::from(id) * 10;
+        let mut s = Schedule::with_window(100);
+        s.refresh(vec![3, 4, 5, 9, 2], t0);
+        // 30 + 40 fit, + 50 would not.
+        assert_eq!(s.next_batch(t0, size), vec![3, 4]);
+        assert_eq!(s.outstanding_bytes(), 70);
+        assert!(s.next_batch(t0, size).is_empty(), "50 more would pass 100");
+        // Delivered but not taken still counts; taken, it is the cache's.
+        s.finished(3, Ok(1), t0);
+        assert!(s.next_batch(t0, size).is_empty());
+        s.acknowledge(1, false);
+        assert_eq!(s.outstanding_bytes(), 40);
+        assert_eq!(s.next_batch(t0, size), vec![5]);
+        // A failure frees its bytes at once.
+        s.finished(4, Err(()), t0);
+        s.finished(5, Ok(2), t0);
+        s.acknowledge(2, false);
+        assert_eq!(s.outstanding_bytes(), 0);
+        // A segment bigger than the window goes alone when nothing is outstanding.
+        assert_eq!(s.next_batch(t0, |_| 500), vec![9]);
+        assert!(s.next_batch(t0, size).is_empty());
+        // Without a window, batches are bounded by BATCH_ITEMS and BATCH_BYTES only.
+        let mut u = Schedule::default();
+        u.refresh(vec![3, 4, 5, 9, 2], t0);
+        assert_eq!(u.next_batch(t0, size), vec![3, 4, 5, 9, 2]);
     }
 
     #[test]

@@ -75,16 +75,18 @@ pub trait Fetcher: Clone + Send + Sync + 'static {
     fn bytes(&self, id: u32) -> u64;
 }
 
-/// Runs the IO stage until the frame loop goes away: keeps `parallel` segment fetches busy from
-/// the latest need list and sends what happens on `tx`.
+/// Runs the IO stage until the frame loop goes away: keeps up to `parallel` segment fetches
+/// busy from the latest need list, with at most `window` bytes in flight or delivered and not
+/// yet taken ([`Schedule::with_window`]), and sends what happens on `tx`.
 pub async fn drive<F: Fetcher>(
     fetcher: F,
     policy: Policy,
     parallel: usize,
+    window: u64,
     mut state: watch::Receiver<Option<Ask>>,
     tx: mpsc::Sender<Event<F::Body>>,
 ) {
-    let mut s = Schedule::default();
+    let mut s = Schedule::with_window(window);
     let mut seq = 0u64;
     let mut fetches: JoinSet<Fetched<F::Body>> = JoinSet::new();
     // What each read request in flight asked for (a task that panics must not strand them).

@@ -36,6 +36,8 @@ pub struct IoConfig {
     pub policy: Policy,
     /// Concurrent segment fetches.
     pub parallel: usize,
+    /// Most bytes in flight or delivered and not yet taken by the frame loop.
+    pub window: u64,
 }
 
 /// What the IO stage knows of the model: each segment's size and checksum (the manifest's
@@ -174,7 +176,14 @@ impl IoStage {
                         return;
                     }
                 };
-                rt.block_on(drive(fetcher, cfg.policy, cfg.parallel, state_rx, tx));
+                rt.block_on(drive(
+                    fetcher,
+                    cfg.policy,
+                    cfg.parallel,
+                    cfg.window,
+                    state_rx,
+                    tx,
+                ));
             })?;
         Ok(IoStage {
             state: state_tx,

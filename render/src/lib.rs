@@ -19,6 +19,7 @@
 //! Vulkan); `WGPU_BACKEND` / `WGPU_ADAPTER_NAME` pick one.
 
 mod calibrate;
+mod held;
 pub mod impostor;
 mod mesh;
 mod pipeline;

@@ -18,6 +18,8 @@ pub struct GpuMesh {
     pub(crate) index_count: u32,
     pub(crate) vertex_count: u32,
     pub(crate) bounds: Aabb,
+    /// Charged to the renderer's account of GPU memory held while the mesh lives.
+    pub(crate) _held: crate::held::Charge,
 }
 
 impl GpuMesh {
@@ -54,12 +56,13 @@ pub struct Uploader {
     pub(crate) device: wgpu::Device,
     pub(crate) queue: wgpu::Queue,
     pub(crate) textured: Arc<textured::Textured>,
+    pub(crate) held: crate::held::Held,
 }
 
 impl Uploader {
     /// Same as [`crate::Renderer::upload`].
     pub fn upload(&self, segment_bytes: &[u8]) -> Result<GpuMesh, RenderError> {
-        upload_segment(&self.device, segment_bytes)
+        upload_segment(&self.device, &self.held, segment_bytes)
     }
 
     /// Same as [`crate::Renderer::upload_impostor`].
@@ -71,7 +74,7 @@ impl Uploader {
     ) -> Result<GpuImpostor, RenderError> {
         scoped(&self.device, || {
             self.textured
-                .upload(&self.device, &self.queue, png, bounds, tile)
+                .upload(&self.device, &self.queue, &self.held, png, bounds, tile)
         })?
     }
 }
@@ -79,6 +82,7 @@ impl Uploader {
 /// Parses a segment and creates its buffers straight from the vertex and index byte streams.
 pub(crate) fn upload_segment(
     device: &wgpu::Device,
+    held: &crate::held::Held,
     segment_bytes: &[u8],
 ) -> Result<GpuMesh, RenderError> {
     let view = GeometryView::parse(segment_bytes).map_err(RenderError::Geometry)?;
@@ -113,6 +117,7 @@ pub(crate) fn upload_segment(
         wgpu::IndexFormat::Uint16
     };
     Ok(GpuMesh {
+        _held: held.charge(vertex.size() + index.size()),
         vertex,
         index,
         index_format,

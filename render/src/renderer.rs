@@ -34,6 +34,7 @@ pub struct Renderer {
     pub(crate) textured: Arc<textured::Textured>,
     pub(crate) clear: wgpu::Color,
     pub(crate) samples: u32,
+    pub(crate) held: crate::held::Held,
 }
 
 impl Renderer {
@@ -105,6 +106,7 @@ impl Renderer {
             textured,
             clear: SKY_COLOR,
             samples,
+            held: Default::default(),
         })
     }
 
@@ -122,6 +124,12 @@ impl Renderer {
         tile: u32,
     ) -> Result<GpuImpostor, RenderError> {
         self.uploader().upload_impostor(png, bounds, tile)
+    }
+
+    /// GPU memory held now by the meshes and impostor boxes this renderer and its uploaders
+    /// created and that are still alive, wherever they are kept (bytes).
+    pub fn gpu_bytes_held(&self) -> u64 {
+        self.held.bytes()
     }
 
     /// Samples per pixel (1, or 4 with MSAA).
@@ -173,7 +181,7 @@ impl Renderer {
 
     /// Parses a geometry segment and copies its vertex and index streams into GPU buffers.
     pub fn upload(&self, segment_bytes: &[u8]) -> Result<GpuMesh, RenderError> {
-        upload_segment(&self.device, segment_bytes)
+        upload_segment(&self.device, &self.held, segment_bytes)
     }
 
     /// A handle that uploads on other threads (e.g. the IO stage) while this renderer draws.
@@ -182,6 +190,7 @@ impl Renderer {
             device: self.device.clone(),
             queue: self.queue.clone(),
             textured: self.textured.clone(),
+            held: self.held.clone(),
         }
     }
 

@@ -25,6 +25,8 @@ pub struct GpuImpostor {
     index: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     bytes: u64,
+    /// Charged to the renderer's account of GPU memory held while the box lives.
+    _held: crate::held::Charge,
 }
 
 impl GpuImpostor {
@@ -106,11 +108,13 @@ impl Textured {
         }
     }
 
-    /// Decodes an atlas (PNG, 3 × 2 tiles of `tile` pixels) and makes the box of `bounds`.
-    pub fn upload(
+    /// Decodes an atlas (PNG, 3 × 2 tiles of `tile` pixels) and makes the box of `bounds`,
+    /// charged to `held`.
+    pub(crate) fn upload(
         &self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
+        held: &crate::held::Held,
         png: &[u8],
         bounds: &Aabb,
         tile: u32,
@@ -168,6 +172,7 @@ impl Textured {
         });
         let bytes = u64::from(w) * u64::from(h) * 4 + vertex.size() + index.size();
         Ok(GpuImpostor {
+            _held: held.charge(bytes),
             vertex,
             index,
             bind_group,

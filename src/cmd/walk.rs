@@ -201,10 +201,19 @@ fn print_figures(s: &WalkSummary) {
         "  skipped per frame: LODs {:.2} mean / {:.0} max, objects {:.2} mean / {:.0} max",
         s.lods_skipped.mean, s.lods_skipped.max, s.objects_skipped.mean, s.objects_skipped.max
     );
+    match s.first_complete {
+        Some(f) => println!(
+            "  first complete frame (every visible object drawn): frame {} after {:.0} KB read",
+            f.frame,
+            f.bytes as f64 / 1e3
+        ),
+        None => println!("  no frame drew every visible object"),
+    }
     println!(
-        "  cache: peak {:.1} of {:.1} MiB, {} evictions; read {} segments, {:.1} MB; fetch latency p50 {:.1} ms p99 {:.1} ms",
+        "  cache: peak {:.1} of {:.1} MiB (GPU memory held, queue and stand-ins included: {:.1} MiB), {} evictions; read {} segments, {:.1} MB; fetch latency p50 {:.1} ms p99 {:.1} ms",
         s.cache_peak_bytes as f64 / MIB,
         s.cache_budget as f64 / MIB,
+        s.gpu_held_peak_bytes as f64 / MIB,
         s.evictions,
         s.segments_read,
         s.bytes_read as f64 / 1e6,

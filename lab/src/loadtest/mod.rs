@@ -108,7 +108,8 @@ impl LoadtestConfig {
             .iter()
             .map(|(name, p)| {
                 let policy = Policy {
-                    cache_bytes: self.cache_bytes,
+                    // The lookahead stops at the cache's own part of the budget.
+                    cache_bytes: portico_client::cache::split_budget(self.cache_bytes).0,
                     frame_time_s: self.budget_s as f32,
                     screen: [world::SCREEN.0, world::SCREEN.1],
                     ..*p

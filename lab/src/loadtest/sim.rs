@@ -154,7 +154,8 @@ pub async fn client(s: Setup) -> ClientResult {
         Mode::Prefetch(p) => p,
         Mode::Demand | Mode::Oracle { .. } => Policy::default(),
     };
-    let task = tokio::spawn(drive(link, policy, PARALLEL, state_rx, tx));
+    let window = portico_client::cache::split_budget(s.cache_bytes).1;
+    let task = tokio::spawn(drive(link, policy, PARALLEL, window, state_rx, tx));
     let mut c = Client::new(&s, rx);
     let mut tick = tokio::time::interval(Duration::from_secs_f64(s.world.dt.max(1e-3)));
     tick.set_missed_tick_behavior(MissedTickBehavior::Delay);
@@ -202,7 +203,7 @@ impl Client {
             mode: s.mode,
             frames: s.frames,
             rx,
-            cache: ObjectCache::new(s.cache_bytes),
+            cache: ObjectCache::new(portico_client::cache::split_budget(s.cache_bytes).0),
             entries: HashMap::new(),
             decider: Decider::new(
                 match s.mode {

@@ -65,6 +65,15 @@ pub struct WalkConfig {
     pub max_turn: f32,
 }
 
+/// The first complete frame of a walk: how soon, and how many bytes it took.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FirstComplete {
+    /// Frame number (0-based).
+    pub frame: u64,
+    /// Bytes read from the server up to and including that frame.
+    pub bytes: u64,
+}
+
 /// The result of a walk (`summary.json`).
 #[derive(Debug, Clone, Serialize)]
 pub struct WalkSummary {
@@ -108,10 +117,17 @@ pub struct WalkSummary {
     pub visibility_fallback_frames: u64,
     /// Cache budget (bytes).
     pub cache_budget: u64,
-    /// Most bytes ever resident (never above the budget).
+    /// Most bytes the cache ever charged (never above the budget).
     pub cache_peak_bytes: u64,
+    /// Most GPU memory held at the end of a frame by every mesh and impostor box alive, counted
+    /// by the renderer where they are created and dropped: the cache's content, arrivals waiting
+    /// in the IO queue, and the average-colour boxes drawn as stand-ins.
+    pub gpu_held_peak_bytes: u64,
     /// Segments released.
     pub evictions: u64,
+    /// The first frame that drew something for every visible object (none skipped), and the
+    /// bytes read up to and including it; `None` if no frame did.
+    pub first_complete: Option<FirstComplete>,
     /// Segments and bytes read from the server.
     pub segments_read: u64,
     /// Bytes read.

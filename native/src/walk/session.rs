@@ -35,9 +35,10 @@ impl<'a> Session<'a> {
         let mut renderer =
             Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
         let cost = portico_render::calibrate(&mut renderer)?;
+        let (cache_bytes, window) = portico_client::cache::split_budget(cfg.cache_bytes);
         let policy = Policy {
             impostors: cfg.elision == Algorithm::Impostors,
-            cache_bytes: cfg.cache_bytes,
+            cache_bytes,
             screen: [cfg.size.0, cfg.size.1],
             frame_time_s: cfg.budget_s as f32,
             ..cfg.policy
@@ -49,6 +50,7 @@ impl<'a> Session<'a> {
             IoConfig {
                 policy,
                 parallel: 8,
+                window,
             },
         )?;
         Ok(Session {

@@ -45,6 +45,8 @@ pub(super) struct Walker<'a> {
     picture: Option<image::RgbaImage>,
     /// Seconds the last frame spent drawing its picture (not part of its frame time).
     pub(super) picture_s: f64,
+    /// Most GPU memory the renderer's meshes and boxes held at the end of a frame.
+    gpu_held_peak: u64,
 }
 
 impl<'a> Walker<'a> {
@@ -52,7 +54,7 @@ impl<'a> Walker<'a> {
         Walker {
             cfg,
             model,
-            cache: ObjectCache::new(cfg.cache_bytes),
+            cache: ObjectCache::new(portico_client::cache::split_budget(cfg.cache_bytes).0),
             decider: Decider::new(
                 cfg.elision,
                 cfg.budget_s,
@@ -72,6 +74,7 @@ impl<'a> Walker<'a> {
             want_picture: false,
             picture: None,
             picture_s: 0.0,
+            gpu_held_peak: 0,
         }
     }
 
@@ -208,6 +211,7 @@ impl<'a> Walker<'a> {
         }
         row.resident_segments = self.cache.len() as u32;
         row.resident_bytes = self.cache.bytes();
+        self.gpu_held_peak = self.gpu_held_peak.max(r.gpu_bytes_held());
         Ok(())
     }
 
@@ -271,9 +275,11 @@ impl<'a> Walker<'a> {
             drawn_fraction: drawn.mean / self.model.model_triangles.max(1) as f64,
             visibility_fallback_frames: rows.iter().filter(|r| r.visibility_fallback).count()
                 as u64,
-            cache_budget: self.cache.budget(),
+            cache_budget: self.cfg.cache_bytes,
             cache_peak_bytes: self.cache.peak_bytes(),
+            gpu_held_peak_bytes: self.gpu_held_peak,
             evictions: self.cache.evictions(),
+            first_complete: first_complete(rows),
             segments_read: self.segments_read,
             bytes_read: self.bytes_read,
             fetch_latency_s: Series::of(&self.latencies),
@@ -290,6 +296,18 @@ impl<'a> Walker<'a> {
         }
         Ok(s)
     }
+}
+
+/// The first frame with visible objects and none of them skipped, and the bytes read until then.
+fn first_complete(rows: &[FrameRow]) -> Option<super::FirstComplete> {
+    let mut bytes = 0u64;
+    rows.iter().find_map(|r| {
+        bytes += r.read_bytes;
+        (r.visible_objects > 0 && r.objects_skipped == 0).then_some(super::FirstComplete {
+            frame: r.frame,
+            bytes,
+        })
+    })
 }
 
 /// What the walker's cache holds, as the frame decision asks it.
