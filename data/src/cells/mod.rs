@@ -9,12 +9,15 @@
 //!   through portal sequences (§3.2.2), stored as stab lists.
 //! - [`realtime`]: eye-to-cell and eye-to-object culling by narrowing the view frustum through
 //!   portals (§4.1.2), and plain frustum culling for comparison.
-//! - [`verify`]: a ray-casting checker for false negatives and overestimation.
+//! - [`verify`]: a ray-casting checker for false negatives and overestimation, against the
+//!   objects' real triangles ([`sight`]) or the occluder boxes.
 
 pub mod occluders;
 pub mod polytope;
 pub mod portals;
 pub mod realtime;
+#[cfg(feature = "native")]
+pub mod sight;
 pub mod sightline;
 #[cfg(feature = "native")]
 pub mod stab;

@@ -1,13 +1,16 @@
-//! `portico verify`: checks the stored visibility against the real occluders by ray casting.
+//! `portico verify`: checks the stored visibility by ray casting.
 //!
 //! Rays start at random points of up to [`CELLS_SAMPLED`] random live cells, the same number
-//! from each, and go in random directions. A ray stops at
-//! the first occluder box it enters (or where it leaves the subdivision); every object whose box
-//! it enters before that is visible from the start cell, and must be in that cell's stored
-//! cell-to-object set — otherwise it is a false negative (must be 0). The overestimate ratio
-//! compares the stored sets with the objects rays actually saw from the sampled cells; rays see
-//! less than everything, so the ratio is an upper bound on the true overestimate.
+//! from each, and go in random directions. What a ray sees is visible from its start cell and
+//! must be in that cell's stored cell-to-object set — otherwise it is a false negative (must be
+//! 0). [`verify_against_triangles`] (what `portico verify` runs) takes what a ray sees from the
+//! objects' own triangles ([`super::sight`]): the first one it hits. [`verify`] takes every
+//! object whose box the ray enters before the first occluder box — the precompute's own
+//! occluders, so it cannot catch occluders extracted wrongly. The overestimate ratio compares
+//! the stored sets with the objects rays actually saw from the sampled cells; rays see less
+//! than everything, so the ratio is an upper bound on the true overestimate.
 
+use super::sight::Triangles;
 use super::{CellGraph, StabList};
 use crate::geometry::Aabb;
 use glam::Vec3;
@@ -39,7 +42,8 @@ pub struct VerifyReport {
     pub ray_visible_mean: f64,
 }
 
-/// Casts `rays` rays (deterministic for a `seed`) and compares with the stab lists.
+/// Casts `rays` rays (deterministic for a `seed`) against the occluder boxes and the objects'
+/// boxes, and compares with the stab lists.
 pub fn verify(
     graph: &CellGraph,
     stabs: &[StabList],
@@ -47,6 +51,34 @@ pub fn verify(
     objects: &[Aabb],
     rays: u64,
     seed: u64,
+) -> VerifyReport {
+    verify_with(graph, stabs, rays, seed, &|origin, dir| {
+        cast(origin, dir, &graph.bounds, occluders, objects)
+    })
+}
+
+/// Casts `rays` rays (deterministic for a `seed`) against the objects' triangles: each sees the
+/// first object it hits inside the subdivision, which must be in its start cell's stab list.
+pub fn verify_against_triangles(
+    graph: &CellGraph,
+    stabs: &[StabList],
+    scene: &Triangles,
+    rays: u64,
+    seed: u64,
+) -> VerifyReport {
+    verify_with(graph, stabs, rays, seed, &|origin, dir| {
+        let exit = slab(origin, dir, &graph.bounds).map_or(0.0, |(_, t1)| t1);
+        scene.first_hit(origin, dir, exit).into_iter().collect()
+    })
+}
+
+/// The ray casting shared by both checks: `cast(origin, dir)` gives what one ray sees.
+fn verify_with(
+    graph: &CellGraph,
+    stabs: &[StabList],
+    rays: u64,
+    seed: u64,
+    cast: &(dyn Fn(Vec3, Vec3) -> Vec<u32> + Sync),
 ) -> VerifyReport {
     let live: Vec<u32> = (0..graph.cells.len() as u32)
         .filter(|&c| graph.cells[c as usize].live)
@@ -77,7 +109,7 @@ pub fn verify(
                 b.min[k] + (b.max[k] - b.min[k]) * rng.random_range(0.001f32..0.999)
             }));
             let dir = random_direction(&mut rng);
-            (cell, cast(origin, dir, &graph.bounds, occluders, objects))
+            (cell, cast(origin, dir))
         })
         .collect();
     let mut per_cell: BTreeMap<u32, BTreeSet<u32>> = BTreeMap::new();
