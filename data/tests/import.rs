@@ -47,6 +47,39 @@ fn models_under(dir: &Path, out: &mut Vec<PathBuf>) {
 /// every other model in the corpus must import.
 const REFUSED: &[(&str, &str)] = &[
     ("OBJ/point_cloud.obj", "contains no triangle meshes"),
+    // Points, lines, line loops and line strips only (glTF modes 0-3): nothing to draw.
+    (
+        "glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/Mesh_PrimitiveMode_00.gltf",
+        "contains no triangle meshes",
+    ),
+    (
+        "glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/Mesh_PrimitiveMode_01.gltf",
+        "contains no triangle meshes",
+    ),
+    (
+        "glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/Mesh_PrimitiveMode_02.gltf",
+        "contains no triangle meshes",
+    ),
+    (
+        "glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/Mesh_PrimitiveMode_03.gltf",
+        "contains no triangle meshes",
+    ),
+    (
+        "glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/Mesh_PrimitiveMode_07.gltf",
+        "contains no triangle meshes",
+    ),
+    (
+        "glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/Mesh_PrimitiveMode_08.gltf",
+        "contains no triangle meshes",
+    ),
+    (
+        "glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/Mesh_PrimitiveMode_09.gltf",
+        "contains no triangle meshes",
+    ),
+    (
+        "glTF2/glTF-Asset-Generator/Mesh_PrimitiveMode/Mesh_PrimitiveMode_10.gltf",
+        "contains no triangle meshes",
+    ),
     ("OBJ/testpoints.obj", "contains no triangle meshes"),
     ("invalid/empty.obj", "contains no triangle meshes"),
     (

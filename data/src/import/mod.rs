@@ -45,11 +45,15 @@ pub fn import_file(path: &Path) -> Result<Model> {
 /// Imports model bytes without touching the file system (no external buffers or material
 /// libraries): `ext` is `obj`, `gltf` or `glb`. For fuzzing and tests.
 pub fn import_bytes(bytes: &[u8], ext: &str) -> std::result::Result<Model, String> {
-    match ext {
+    let model = match ext {
         "obj" => obj::import_slice(bytes, None),
         "gltf" | "glb" => gltf::import_slice(bytes, None),
         other => Err(format!("unsupported model format '.{other}'")),
+    }?;
+    if model.instances.is_empty() {
+        return Err("contains no triangle meshes".into());
     }
+    Ok(model)
 }
 
 /// Builds a mesh from float streams, validating indices and filling in missing normals with

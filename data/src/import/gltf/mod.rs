@@ -228,6 +228,15 @@ impl Importer<'_> {
                     }
                 }
             };
+            // Points and lines are not drawn: a mesh with no triangle primitive is no object.
+            if self.model.defs[p.def as usize].lods[0].indices.is_empty() {
+                warnings.push(format!(
+                    "node {n}{}: mesh {} has no triangles (points or lines only): skipped",
+                    name_of(&node.name),
+                    mesh.value()
+                ));
+                continue;
+            }
             placed.push(p);
         }
         self.place(placed, warnings)
