@@ -295,3 +295,84 @@ fn what_the_observer_sees_now_is_read_before_the_rest_of_the_lookahead() {
         "some observer sees something and has more ahead"
     );
 }
+
+/// The level of each geometry segment counted from the coarsest (0), as the read set orders
+/// them: a definition's LOD table lists finest first.
+fn levels(p: &Prefetcher) -> std::collections::HashMap<u32, u32> {
+    let header = p.database().header();
+    let mut out = std::collections::HashMap::new();
+    for inst in &header.instances {
+        let lods = header.lods_of(inst);
+        for (i, l) in lods.iter().enumerate() {
+            out.insert(l.segment, (lods.len() - 1 - i) as u32);
+        }
+    }
+    out
+}
+
+/// The whole order of an answer (Funkhouser §5.2.2 with the current view first): stab lists
+/// and atlases, then the geometry in at most two runs — what the observer sees now, then the
+/// rest of the lookahead — each ordered by level (coarsest first), then frames until visible.
+/// Returns the number of geometry items in the first run.
+fn assert_read_order(p: &Prefetcher, obs: &Observer, policy: &Policy) -> usize {
+    let level = levels(p);
+    let r = p.answer(obs, policy, &HashSet::new()).unwrap();
+    let first_geo = r
+        .items
+        .iter()
+        .position(|i| i.kind == NeedKind::Geometry)
+        .unwrap_or(r.items.len());
+    assert!(
+        r.items[first_geo..]
+            .iter()
+            .all(|i| i.kind == NeedKind::Geometry),
+        "a stab list or atlas after geometry"
+    );
+    let keys: Vec<(u32, u32)> = r.items[first_geo..]
+        .iter()
+        .map(|i| (level[&i.segment], i.frames))
+        .collect();
+    let descents: Vec<usize> = (1..keys.len()).filter(|&k| keys[k] < keys[k - 1]).collect();
+    assert!(
+        descents.len() <= 1,
+        "more than two ordered runs: descents at {descents:?} of {keys:?}"
+    );
+    let first_run = descents.first().copied().unwrap_or(keys.len());
+    if !descents.is_empty() {
+        assert!(
+            keys[..first_run].iter().all(|&(_, f)| f == 0),
+            "the first run holds something not visible now: {:?}",
+            &keys[..first_run]
+        );
+    }
+    first_run
+}
+
+#[test]
+fn the_whole_read_order_is_now_then_level_then_frames() {
+    let policy = Policy {
+        read_bytes: u64::MAX,
+        range_cull: RangeCull::Any,
+        ..Policy::default()
+    };
+    let p = prefetcher(false);
+    let mut two_runs = 0;
+    let obs = observers(p);
+    for o in &obs {
+        let first = assert_read_order(p, o, &policy);
+        let geometry = p
+            .answer(o, &policy, &HashSet::new())
+            .unwrap()
+            .items
+            .iter()
+            .filter(|i| i.kind == NeedKind::Geometry)
+            .count();
+        two_runs += usize::from(first < geometry);
+    }
+    assert!(two_runs > 0, "no observer had both a view and a lookahead");
+    // Without cells: the same order, the view found by the frustum alone.
+    let q = prefetcher(true);
+    for o in &obs {
+        assert_read_order(q, o, &policy);
+    }
+}
