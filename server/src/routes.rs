@@ -486,7 +486,37 @@ pub async fn fallback() -> Error {
 
 #[cfg(test)]
 mod tests {
-    use super::{Unsatisfiable, parse_range};
+    use super::{Unsatisfiable, not_modified, parse_range};
+    use axum::http::{HeaderMap, HeaderValue, header};
+
+    /// `If-None-Match` (RFC 9110 §13.1.2): weak comparison, a list of tags, `*`; anything
+    /// else — another tag, no header — is not a match.
+    #[test]
+    fn if_none_match_compares_weakly_over_lists() {
+        let with = |v: &str| {
+            let mut h = HeaderMap::new();
+            h.insert(header::IF_NONE_MATCH, HeaderValue::from_str(v).unwrap());
+            h
+        };
+        let tag = "\"abc-json\"";
+        for v in [
+            "\"abc-json\"",
+            "W/\"abc-json\"",
+            "\"x\", \"abc-json\"",
+            "W/\"x\",W/\"abc-json\"",
+            "*",
+        ] {
+            assert!(not_modified(&with(v), tag), "{v} should match");
+            assert!(
+                not_modified(&with(v), "W/\"abc-json\""),
+                "{v} vs a weak tag"
+            );
+        }
+        for v in ["\"abc-bincode\"", "\"abc\"", "\"x\", \"y\"", ""] {
+            assert!(!not_modified(&with(v), tag), "{v} should not match");
+        }
+        assert!(!not_modified(&HeaderMap::new(), tag));
+    }
 
     #[test]
     fn byte_ranges() {

@@ -339,13 +339,31 @@ async fn a_token_guards_every_api_route_but_not_health() {
             "{r}"
         );
     }
-    let post = http.post(format!("{}/v1/prefetch", s.base)).body("{}");
-    error_of(post.send().await.unwrap(), 401).await;
-    // The WebSocket upgrade: refused without a token, accepted with `?token=` (browsers cannot
-    // set headers on it).
+    for r in ["/v1/prefetch".to_string(), format!("/v1/db/{id}/prefetch")] {
+        let url = format!("{}{r}", s.base);
+        error_of(http.post(&url).body("{}").send().await.unwrap(), 401).await;
+        let wrong = http.post(&url).bearer_auth("wrong").body("{}");
+        error_of(wrong.send().await.unwrap(), 401).await;
+        // With the token the request gets past auth (and fails as the empty body it is).
+        let right = http.post(&url).bearer_auth("s3cret").body("{}");
+        let status = right.send().await.unwrap().status();
+        assert_ne!(status, 401, "{r} refused the right token");
+    }
+    // The WebSocket upgrade: refused (401) without a token and with a wrong one; accepted with
+    // `?token=` (browsers cannot set headers on it).
     let ws = s.base.replace("http://", "ws://");
-    let refused = tokio_tungstenite::connect_async(format!("{ws}/v1/stream")).await;
-    assert!(refused.is_err(), "a stream without a token was accepted");
+    for url in [
+        format!("{ws}/v1/stream"),
+        format!("{ws}/v1/stream?token=wrong"),
+    ] {
+        match tokio_tungstenite::connect_async(&url).await {
+            Ok(_) => panic!("{url}: a stream without the right token was accepted"),
+            Err(tokio_tungstenite::tungstenite::Error::Http(r)) => {
+                assert_eq!(r.status(), 401, "{url}")
+            }
+            Err(e) => panic!("{url}: refused, but not with 401: {e}"),
+        }
+    }
     let (mut sock, _) = tokio_tungstenite::connect_async(format!("{ws}/v1/stream?token=s3cret"))
         .await
         .expect("a stream with the query token");
@@ -399,8 +417,10 @@ async fn the_stream_pushes_needed_segments_and_survives_vanishing_clients() {
         .unwrap();
     let mut got = Vec::new();
     let mut saw_error = false;
+    let patience = std::time::Duration::from_secs(10);
     while got.len() < expected.items.len() || !saw_error {
-        let Message::Binary(frame) = ws.next().await.unwrap().unwrap() else {
+        let next = tokio::time::timeout(patience, ws.next()).await;
+        let Message::Binary(frame) = next.expect("a frame within 10 s").unwrap().unwrap() else {
             continue;
         };
         match portico_protocol::parse_server_frame(&frame).unwrap() {
@@ -409,7 +429,9 @@ async fn the_stream_pushes_needed_segments_and_survives_vanishing_clients() {
                 got.push(id);
             }
             ServerFrame::Control(StreamServer::Error(_)) => saw_error = true,
-            ServerFrame::Control(StreamServer::Dropped(_)) => {}
+            ServerFrame::Control(StreamServer::Dropped(d)) => {
+                panic!("one observer, nothing to drop: {d:?}")
+            }
         }
     }
     let want: Vec<u32> = expected.items.iter().map(|i| i.segment).collect();
@@ -429,11 +451,18 @@ async fn the_stream_pushes_needed_segments_and_survives_vanishing_clients() {
     // Graceful shutdown closes open sessions.
     s.stop.unwrap().send(()).unwrap();
     s.task.await.unwrap().unwrap();
-    while let Some(Ok(m)) = ws.next().await {
-        if matches!(m, Message::Close(_)) {
-            break;
+    let closed = tokio::time::timeout(patience, async {
+        while let Some(Ok(m)) = ws.next().await {
+            if matches!(m, Message::Close(_)) {
+                return true;
+            }
         }
-    }
+        false
+    });
+    assert!(
+        closed.await.expect("closed within 10 s"),
+        "the session ended without a Close frame"
+    );
 }
 
 /// A damaged segment on disk fails alone: a batch that holds it still brings the others (it is

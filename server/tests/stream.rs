@@ -1,0 +1,257 @@
+//! The WebSocket stream's promises, each with a deadline: pushes are paced to the session's byte
+//! rate, nothing the client holds is sent again (and an `Evicted` segment is), queued segments a
+//! new observer no longer needs are reported `Dropped` and never sent, and a silent client is
+//! closed after the idle timeout with a Close frame.
+
+use futures_util::{SinkExt, StreamExt};
+use portico_protocol::{
+    Observer, PROTOCOL_VERSION, Policy, ServerFrame, StreamClient, StreamServer,
+};
+use portico_server::Config;
+use std::collections::HashSet;
+use std::time::{Duration, Instant};
+use tokio_tungstenite::tungstenite::Message;
+
+mod common;
+use common::{request, start};
+
+type Ws =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+fn binary(msg: &StreamClient) -> Message {
+    Message::Binary(portico_protocol::to_bincode(msg).unwrap().into())
+}
+
+async fn connect(base: &str) -> Ws {
+    let url = base.replace("http://", "ws://") + "/v1/stream";
+    tokio_tungstenite::connect_async(&url).await.unwrap().0
+}
+
+async fn hello(ws: &mut Ws, policy: Policy, rate: u64) {
+    let msg = StreamClient::Hello {
+        version: PROTOCOL_VERSION,
+        policy,
+        rate_bytes_per_s: rate,
+    };
+    ws.send(binary(&msg)).await.unwrap();
+}
+
+/// What the server sends next, or `None` when nothing comes within `wait`.
+enum Got {
+    Segment(u32, usize),
+    Dropped(Vec<u32>),
+    Error(String),
+    Close,
+}
+
+async fn next(ws: &mut Ws, wait: Duration) -> Option<Got> {
+    loop {
+        let m = tokio::time::timeout(wait, ws.next()).await.ok()?;
+        match m {
+            None | Some(Err(_)) | Some(Ok(Message::Close(_))) => return Some(Got::Close),
+            Some(Ok(Message::Binary(frame))) => {
+                return Some(
+                    match portico_protocol::parse_server_frame(&frame).unwrap() {
+                        ServerFrame::Segment(id, bytes) => Got::Segment(id, bytes.len()),
+                        ServerFrame::Control(StreamServer::Dropped(d)) => Got::Dropped(d),
+                        ServerFrame::Control(StreamServer::Error(e)) => Got::Error(e.message),
+                    },
+                );
+            }
+            Some(Ok(_)) => continue,
+        }
+    }
+}
+
+/// Receives segments until `want` of them have arrived (10 s at most); their ids and bytes.
+async fn segments(ws: &mut Ws, want: usize) -> Vec<(u32, usize)> {
+    let mut got = Vec::new();
+    while got.len() < want {
+        match next(ws, Duration::from_secs(10)).await {
+            Some(Got::Segment(id, n)) => got.push((id, n)),
+            Some(Got::Dropped(d)) => panic!("dropped {d:?} with one observer"),
+            Some(Got::Error(e)) => panic!("error: {e}"),
+            Some(Got::Close) => panic!("closed after {} of {want} segments", got.len()),
+            None => panic!("only {} of {want} segments within 10 s", got.len()),
+        }
+    }
+    got
+}
+
+#[tokio::test]
+async fn pushes_are_paced_to_the_sessions_byte_rate() {
+    let s = start(Config::default()).await;
+    let req = request(s.state.db());
+    let answer = s
+        .state
+        .prefetcher
+        .answer(&req.observer, &req.policy, &HashSet::new())
+        .unwrap();
+    let total: u64 = answer.items.iter().map(|i| i.bytes).sum();
+    assert!(total > 50_000, "too little to pace: {total} bytes");
+    // A rate that takes 0.6 s for the whole answer, and one that is not a limit.
+    let mut elapsed = Vec::new();
+    for rate in [total * 10 / 6, 1 << 30] {
+        let mut ws = connect(&s.base).await;
+        hello(&mut ws, req.policy, rate).await;
+        let t = Instant::now();
+        ws.send(binary(&StreamClient::Observer(req.observer)))
+            .await
+            .unwrap();
+        let got = segments(&mut ws, answer.items.len()).await;
+        elapsed.push(t.elapsed().as_secs_f64());
+        let sent: u64 = got.iter().map(|&(_, n)| n as u64).sum();
+        assert_eq!(sent, total);
+    }
+    // The first push goes at once; the rest wait for the link: (total - first) / rate.
+    let first = answer.items[0].bytes as f64;
+    let paced_floor = (total as f64 - first) / (total as f64 * 10.0 / 6.0);
+    assert!(
+        elapsed[0] >= paced_floor * 0.95,
+        "paced: {:.3} s, at least {paced_floor:.3} s expected",
+        elapsed[0]
+    );
+    assert!(
+        elapsed[1] < elapsed[0],
+        "unpaced {:.3} s vs paced {:.3} s",
+        elapsed[1],
+        elapsed[0]
+    );
+}
+
+#[tokio::test]
+async fn nothing_held_is_sent_again_and_an_evicted_segment_is() {
+    let s = start(Config::default()).await;
+    let req = request(s.state.db());
+    let n = s
+        .state
+        .prefetcher
+        .answer(&req.observer, &req.policy, &HashSet::new())
+        .unwrap()
+        .items
+        .len();
+    let mut ws = connect(&s.base).await;
+    hello(&mut ws, req.policy, 1 << 30).await;
+    let observe = binary(&StreamClient::Observer(req.observer));
+    ws.send(observe.clone()).await.unwrap();
+    let got = segments(&mut ws, n).await;
+    let ids: HashSet<u32> = got.iter().map(|&(id, _)| id).collect();
+    assert_eq!(ids.len(), n, "a segment was sent twice");
+    // The same observer again: the client holds everything, nothing comes.
+    ws.send(observe.clone()).await.unwrap();
+    if let Some(Got::Segment(id, _)) = next(&mut ws, Duration::from_millis(500)).await {
+        panic!("segment {id} sent again while held");
+    }
+    // The client evicts one: it, and only it, comes again.
+    let evicted = got[got.len() / 2].0;
+    ws.send(binary(&StreamClient::Evicted(vec![evicted])))
+        .await
+        .unwrap();
+    ws.send(observe).await.unwrap();
+    let again = segments(&mut ws, 1).await;
+    assert_eq!(again[0].0, evicted);
+    if let Some(Got::Segment(id, _)) = next(&mut ws, Duration::from_millis(500)).await {
+        panic!("segment {id} sent although held");
+    }
+}
+
+#[tokio::test]
+async fn queued_segments_no_longer_needed_are_dropped_and_never_sent() {
+    let s = start(Config::default()).await;
+    let db = s.state.db();
+    let req = request(db);
+    let g = db.cell_graph().unwrap().unwrap();
+    // A second observer in the live cell farthest from the first.
+    let here = glam::Vec3::from(req.observer.eye);
+    let far = g
+        .cells
+        .iter()
+        .filter(|c| c.live)
+        .map(|c| glam::Vec3::from(c.bounds.min).lerp(glam::Vec3::from(c.bounds.max), 0.5))
+        .max_by(|a, b| a.distance(here).total_cmp(&b.distance(here)))
+        .unwrap();
+    let there = Observer {
+        eye: far.into(),
+        ..req.observer
+    };
+    let policy = Policy {
+        read_bytes: 1 << 30,
+        ..req.policy
+    };
+    let answer = |o: &Observer| -> HashSet<u32> {
+        let a = s.state.prefetcher.answer(o, &policy, &HashSet::new());
+        a.unwrap().items.iter().map(|i| i.segment).collect()
+    };
+    let (first, second) = (answer(&req.observer), answer(&there));
+    assert!(
+        first.difference(&second).count() > 2,
+        "the two observers need nearly the same segments"
+    );
+    let mut ws = connect(&s.base).await;
+    // 20 KB/s: the first answer's queue drains for seconds.
+    hello(&mut ws, policy, 20_000).await;
+    ws.send(binary(&StreamClient::Observer(req.observer)))
+        .await
+        .unwrap();
+    let early = segments(&mut ws, 1).await;
+    ws.send(binary(&StreamClient::Observer(there)))
+        .await
+        .unwrap();
+    let mut sent: HashSet<u32> = early.iter().map(|&(id, _)| id).collect();
+    let mut dropped = None;
+    while dropped.is_none() {
+        match next(&mut ws, Duration::from_secs(10)).await {
+            Some(Got::Segment(id, _)) => {
+                sent.insert(id);
+            }
+            Some(Got::Dropped(d)) => dropped = Some(d),
+            other => panic!("no Dropped within 10 s: {}", other.is_some()),
+        }
+    }
+    let dropped: HashSet<u32> = dropped.unwrap().into_iter().collect();
+    assert!(!dropped.is_empty());
+    assert!(
+        dropped.is_subset(&first) && dropped.is_disjoint(&second),
+        "dropped segments must be the first observer's that the second does not need"
+    );
+    // What was dropped never comes; the rest of what arrives is the second observer's.
+    while let Some(Got::Segment(id, _)) = next(&mut ws, Duration::from_millis(700)).await {
+        assert!(
+            !dropped.contains(&id),
+            "segment {id} sent after it was dropped"
+        );
+        assert!(
+            second.contains(&id),
+            "segment {id} is not needed by the latest observer"
+        );
+    }
+}
+
+#[tokio::test]
+async fn a_silent_client_is_closed_after_the_idle_timeout() {
+    let s = start(Config {
+        idle_timeout: Duration::from_millis(300),
+        ..Config::default()
+    })
+    .await;
+    let mut ws = connect(&s.base).await;
+    let t = Instant::now();
+    match next(&mut ws, Duration::from_secs(5)).await {
+        Some(Got::Close) => {}
+        Some(_) => panic!("a message to a silent client"),
+        None => panic!("still open after 5 s"),
+    }
+    let waited = t.elapsed();
+    assert!(
+        waited >= Duration::from_millis(250) && waited < Duration::from_secs(3),
+        "closed after {waited:?}, the idle timeout is 300 ms"
+    );
+    // A client that talks is not closed: pings at 100 ms keep it open past the timeout.
+    let mut ws = connect(&s.base).await;
+    for _ in 0..8 {
+        ws.send(Message::Ping(vec![].into())).await.unwrap();
+        if let Some(Got::Close) = next(&mut ws, Duration::from_millis(100)).await {
+            panic!("closed although the client talks");
+        }
+    }
+}
