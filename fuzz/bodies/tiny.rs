@@ -20,8 +20,13 @@ pub fn tiny_db() -> &'static PathBuf {
         std::fs::write(&glb, &b.glb).unwrap();
         let out = dir.join("tiny.portico");
         let model = portico_data::import::import_file(&glb).unwrap();
-        portico_data::build::build(model, &out, &Default::default(), &portico_data::build::Quiet)
-            .unwrap();
+        portico_data::build::build(
+            model,
+            &out,
+            &Default::default(),
+            &portico_data::build::Quiet,
+        )
+        .unwrap();
         out
     })
 }

@@ -1,13 +1,8 @@
-//! Fuzzes the model importers: any bytes, read as glTF/GLB (the container is told by its magic)
-//! and as OBJ, must give a model or an error, never a panic, a hang or unbounded memory. Seed the
-//! corpus with the import cases (fuzz/README.md): small real glTF and OBJ files, each with a
-//! fault real exporters produce.
+//! The `import` fuzz target: `bodies/import.rs` under libFuzzer. The same body replays the committed
+//! seeds in the workspace's tests (`tests/fuzz_seeds.rs`).
 #![no_main]
 
-use libfuzzer_sys::fuzz_target;
-use portico_data::import::import_bytes;
+#[path = "../bodies/import.rs"]
+mod body;
 
-fuzz_target!(|data: &[u8]| {
-    let _ = import_bytes(data, "gltf");
-    let _ = import_bytes(data, "obj");
-});
+libfuzzer_sys::fuzz_target!(|data: &[u8]| body::run(data));

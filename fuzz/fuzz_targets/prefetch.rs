@@ -1,41 +1,10 @@
-//! Fuzzes what a prefetch request reaches on the server: any bytes, decoded as a request (bincode
-//! and JSON), checked by the server's `validate`, and, when valid, answered by
-//! `Prefetcher::answer_within` on the tiny building under a deadline. Never a panic, and every
-//! answer stays within its bounds (release hints capped).
+//! The `prefetch` fuzz target: `bodies/prefetch.rs` under libFuzzer. The same body replays the committed
+//! seeds in the workspace's tests (`tests/fuzz_seeds.rs`).
 #![no_main]
 
-#[path = "tiny.rs"]
+#[path = "../bodies/prefetch.rs"]
+mod body;
+#[path = "../bodies/tiny.rs"]
 mod tiny;
 
-use libfuzzer_sys::fuzz_target;
-use portico_data::prefetch::{Budget, MAX_RELEASE_HINTS, Prefetcher};
-use portico_protocol::PrefetchRequest;
-use std::sync::{Arc, OnceLock};
-use std::time::{Duration, Instant};
-
-fn prefetcher() -> &'static Prefetcher {
-    static P: OnceLock<Prefetcher> = OnceLock::new();
-    P.get_or_init(|| {
-        let db = portico_data::Database::open(tiny::tiny_db()).unwrap();
-        Prefetcher::new(Arc::new(db)).unwrap()
-    })
-}
-
-fuzz_target!(|data: &[u8]| {
-    let p = prefetcher();
-    let segments = p.database().segments().len();
-    let decoded = [
-        portico_protocol::from_bincode::<PrefetchRequest>(data).ok(),
-        portico_protocol::from_json::<PrefetchRequest>(data).ok(),
-    ];
-    for req in decoded.into_iter().flatten() {
-        let Ok(held) = portico_server::routes::validate(&req, segments) else {
-            continue;
-        };
-        let budget = Budget::until(Instant::now() + Duration::from_millis(250));
-        if let Ok(a) = p.answer_within(&req.observer, &req.policy, &held, &budget) {
-            assert!(a.evict.len() <= MAX_RELEASE_HINTS);
-            assert!(a.items.iter().all(|i| (i.segment as usize) < segments));
-        }
-    }
-});
+libfuzzer_sys::fuzz_target!(|data: &[u8]| body::run(data));

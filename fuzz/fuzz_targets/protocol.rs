@@ -1,16 +1,8 @@
-//! Fuzzes the protocol decoders the server exposes: any bytes give a message or an error, never
-//! a panic (the prefetch body, stream messages in both encodings, server frames, held sets).
+//! The `protocol` fuzz target: `bodies/protocol.rs` under libFuzzer. The same body replays the committed
+//! seeds in the workspace's tests (`tests/fuzz_seeds.rs`).
 #![no_main]
 
-use libfuzzer_sys::fuzz_target;
-use portico_protocol::{PrefetchRequest, StreamClient};
+#[path = "../bodies/protocol.rs"]
+mod body;
 
-fuzz_target!(|data: &[u8]| {
-    if let Ok(req) = portico_protocol::from_bincode::<PrefetchRequest>(data) {
-        let _ = portico_protocol::decode_held(&req.held);
-    }
-    let _ = portico_protocol::from_json::<PrefetchRequest>(data);
-    let _ = portico_protocol::from_bincode::<StreamClient>(data);
-    let _ = portico_protocol::from_json::<StreamClient>(data);
-    let _ = portico_protocol::parse_server_frame(data);
-});
+libfuzzer_sys::fuzz_target!(|data: &[u8]| body::run(data));
