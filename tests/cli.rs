@@ -112,6 +112,22 @@ fn generate_is_deterministic() {
     );
 }
 
+/// A build is a function of its input: twice, with one thread and with four, the same bytes
+/// (LODs, cells, stab lists, impostor atlases, the database id derived from them).
+#[test]
+fn build_is_deterministic_whatever_the_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let glb = generated(dir.path());
+    let mut files = Vec::new();
+    for (name, threads) in [("a", "1"), ("b", "4"), ("c", "1")] {
+        let out = dir.path().join(format!("{name}.portico"));
+        ok(&["build", s(&glb), "-o", s(&out), "--threads", threads]);
+        files.push(std::fs::read(&out).unwrap());
+    }
+    assert!(files[0] == files[2], "two builds with one thread differ");
+    assert!(files[0] == files[1], "one thread and four differ");
+}
+
 #[test]
 fn bad_input_is_one_clear_line_and_leaves_nothing_behind() {
     let dir = tempfile::tempdir().unwrap();
@@ -204,6 +220,29 @@ fn serve_picks_up_a_rebuilt_file_on_sighup_and_stops_on_sigterm() {
     let first = lines.next().unwrap().unwrap();
     let addr = first.rsplit("http://").next().unwrap().trim().to_string();
     let before = database_id(&addr).expect("manifest");
+    // A damaged file renamed over the served one: the reload fails, says so in one line, and
+    // the server goes on serving the file it has.
+    let bad = dir.path().join("bad.tmp");
+    let mut garbage = std::fs::read(&db).unwrap();
+    garbage.truncate(garbage.len() / 2);
+    std::fs::write(&bad, garbage).unwrap();
+    std::fs::rename(&bad, &db).unwrap();
+    let hup = Command::new("kill")
+        .args(["-HUP", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(hup.success());
+    let failed = lines.next().unwrap().unwrap();
+    assert!(
+        failed.starts_with("reload failed, still serving the previous file: ")
+            && failed.contains("served.portico"),
+        "{failed}"
+    );
+    assert_eq!(
+        database_id(&addr).as_deref(),
+        Some(before.as_str()),
+        "a failed reload keeps the old map"
+    );
     // A different model renamed over the served file, as a rebuild does.
     let other = dir.path().join("other.glb");
     ok(&[

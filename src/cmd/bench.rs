@@ -1,6 +1,6 @@
 //! `portico bench --db FILE.portico (--path FILE | --path-kind tour [--legs L --seed S])
-//! --budget-ms B [--size 320x240] [--max-frames F] [--algorithms regular,none,static,feedback,optimize]
-//! --out DIR`: frame rate and image fidelity of the detail elision algorithms
+//! --budget-ms B [--size 640x480] [--max-frames F] [--algorithms regular,none,static,feedback,optimize,impostors,coarsest]
+//! -o DIR`: frame rate and image fidelity of the detail elision algorithms
 //! (Funkhouser Table 4.3 / Fig. 4.22, RRB §5.2-5.3). The work is `portico_lab::bench`.
 
 use crate::cmd::values;

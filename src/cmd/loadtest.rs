@@ -1,6 +1,6 @@
 //! `portico loadtest --server URL --clients N (--path FILE | --path-kind tour) [--policy SPEC |
 //! --sweep [reduced|full|depth|gran|cull]] [--link rtt=20ms,rate=100mbit] [--cache-mb 64]
-//! [--budget-ms 50] [--max-frames F] --out DIR`: simulated clients against a real server, to
+//! [--budget-ms 50] [--max-frames F] -o DIR`: simulated clients against a real server, to
 //! measure prefetch policies against demand fetch and an oracle (Funkhouser 1993 §5.3);
 //! with `--stress 1,16,64`, the server's prefetch latency at those numbers of clients instead.
 

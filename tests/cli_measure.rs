@@ -1,0 +1,160 @@
+//! The measuring commands as a user runs them: `portico loadtest` (policies against both
+//! baselines, and `--stress`) and `portico bench` against a `portico serve` process, on the tiny
+//! building, each writing what its help promises.
+
+use std::io::BufRead;
+use std::path::Path;
+use std::process::{Child, Command, Output, Stdio};
+
+fn portico(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_portico"))
+        .args(args)
+        .output()
+        .expect("run portico")
+}
+
+fn ok(args: &[&str]) -> String {
+    let out = portico(args);
+    assert!(
+        out.status.success(),
+        "portico {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("utf-8")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
+
+/// `portico serve` on a free port; the child (killed on drop) and its base URL.
+struct Server(Child, String);
+
+impl Drop for Server {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn serve(db: &Path) -> Server {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_portico"))
+        .args(["serve", s(db), "--listen", "127.0.0.1:0"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("serve");
+    let mut lines = std::io::BufReader::new(child.stderr.take().expect("stderr")).lines();
+    let first = lines.next().expect("a line").expect("utf-8");
+    let url = format!(
+        "http://{}",
+        first.rsplit("http://").next().unwrap_or("").trim()
+    );
+    // Keep draining the log so the server never blocks on a full pipe.
+    std::thread::spawn(move || for _ in lines.map_while(Result::ok) {});
+    Server(child, url)
+}
+
+fn tiny_database(dir: &Path) -> std::path::PathBuf {
+    let glb = dir.join("tiny.glb");
+    let db = dir.join("tiny.portico");
+    ok(&["generate", "--preset", "tiny", "--seed", "5", "-o", s(&glb)]);
+    ok(&["build", s(&glb), "-o", s(&db)]);
+    db
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    serde_json::from_str(&text).expect("JSON")
+}
+
+#[test]
+fn loadtest_stress_and_bench_run_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = tiny_database(dir.path());
+    let server = serve(&db);
+
+    let lt = dir.path().join("lt");
+    let said = ok(&[
+        "loadtest",
+        "--server",
+        &server.1,
+        "--clients",
+        "2",
+        "--path-kind",
+        "tour",
+        "--max-frames",
+        "30",
+        "--policy",
+        "depth=8,gran=object,range=frustum,look=any",
+        "--link",
+        "rtt=20ms,rate=50mbit",
+        "-o",
+        s(&lt),
+    ]);
+    let summary = json(&lt.join("summary.json"));
+    let names: Vec<&str> = summary["policies"]
+        .as_array()
+        .expect("policies")
+        .iter()
+        .filter_map(|p| p["name"].as_str())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "depth=8,gran=object,range=frustum,look=any",
+            "demand",
+            "oracle"
+        ]
+    );
+    assert_eq!(summary["clients"], 2);
+    assert!(lt.join("report.md").is_file());
+    assert!(
+        said.contains("met: ") || said.contains("NOT met: "),
+        "{said}"
+    );
+
+    let st = dir.path().join("stress");
+    let said = ok(&[
+        "loadtest",
+        "--server",
+        &server.1,
+        "--path-kind",
+        "tour",
+        "--stress",
+        "1,4",
+        "--stress-seconds",
+        "0.5",
+        "-o",
+        s(&st),
+    ]);
+    let stress = json(&st.join("stress.json"));
+    let levels = stress["levels"].as_array().expect("levels");
+    assert_eq!(levels.len(), 2, "{said}");
+    for (l, clients) in levels.iter().zip([1, 4]) {
+        assert_eq!(l["clients"], clients);
+        assert!(l["requests"].as_u64().is_some_and(|n| n > 0), "{l}");
+        assert_eq!(l["errors"], 0, "{l}");
+    }
+
+    let b = dir.path().join("bench");
+    ok(&[
+        "bench",
+        "--db",
+        s(&db),
+        "--path-kind",
+        "tour",
+        "--max-frames",
+        "12",
+        "--size",
+        "160x120",
+        "--algorithms",
+        "regular,optimize",
+        "-o",
+        s(&b),
+    ]);
+    let bench = json(&b.join("summary.json"));
+    let runs = bench["runs"].as_array().expect("runs");
+    assert_eq!(runs.len(), 2, "{bench}");
+    assert!(b.join("report.md").is_file() && b.join("frames.csv").is_file());
+}
