@@ -180,21 +180,70 @@ mod tests {
 
     #[test]
     fn random_operations_keep_the_accounting_exact() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::SmallRng::seed_from_u64(12345);
         let mut c = ObjectCache::new(1000);
-        let mut x = 12345u64;
+        let (mut released, mut removed) = (0u64, 0u64);
         for _ in 0..10_000 {
-            x ^= x << 13;
-            x ^= x >> 7;
-            x ^= x << 17;
-            let id = (x % 50) as u32;
-            match x % 3 {
-                0 => drop(c.insert(id, (), (x >> 8) % 400)),
+            let id = rng.random_range(0..50u32);
+            match rng.random_range(0..4) {
+                0 => {
+                    if let Ok(r) = c.insert(id, (), rng.random_range(0..400)) {
+                        released += r.len() as u64;
+                    }
+                }
                 1 => c.touch(id),
-                _ => drop(c.remove(id)),
+                2 => c.demote(id),
+                _ => removed += u64::from(c.remove(id)),
             }
             assert!(c.bytes() <= c.budget());
+            assert_eq!(c.len(), c.ids().count());
+            assert_eq!(c.is_empty(), c.ids().next().is_none());
         }
         let sum: u64 = c.lru.iter().map(|(_, (_, b))| *b).sum();
         assert_eq!(sum, c.bytes());
+        assert_eq!(c.evictions(), released + removed);
+    }
+
+    #[test]
+    fn exactly_full_releases_nothing_and_counts_what_it_releases() {
+        let mut c = ObjectCache::new(100);
+        assert!(c.is_empty());
+        c.insert(1, (), 60).unwrap();
+        assert_eq!(
+            c.insert(2, (), 40).unwrap(),
+            Vec::<u32>::new(),
+            "60 + 40 fits 100"
+        );
+        assert_eq!((c.bytes(), c.len(), c.evictions()), (100, 2, 0));
+        assert!(!c.is_empty());
+        assert_eq!(c.insert(3, (), 1).unwrap(), vec![1]);
+        assert!(c.remove(2));
+        assert_eq!(c.evictions(), 2, "one released to make room, one removed");
+    }
+
+    #[test]
+    fn demoted_entries_go_first_and_ids_run_head_first() {
+        let mut c = ObjectCache::new(100);
+        for id in [1, 2, 3] {
+            c.insert(id, (), 30).unwrap();
+        }
+        assert_eq!(c.ids().collect::<Vec<_>>(), vec![3, 2, 1]);
+        // The server says 3 left the lookahead set: it is released before 1 and 2.
+        c.demote(3);
+        assert_eq!(c.ids().collect::<Vec<_>>(), vec![2, 1, 3]);
+        assert_eq!(c.insert(4, (), 30).unwrap(), vec![3]);
+        assert_eq!(c.ids().collect::<Vec<_>>(), vec![4, 2, 1]);
+    }
+
+    #[test]
+    fn the_io_window_is_an_eighth_and_the_two_parts_make_the_budget() {
+        assert_eq!(split_budget(64 << 20), (56 << 20, 8 << 20));
+        assert_eq!(split_budget(800), (700, 100));
+        assert_eq!(split_budget(7), (7, 0));
+        for b in [0, 1, 9, 1000, u64::MAX] {
+            let (cache, window) = split_budget(b);
+            assert_eq!(cache + window, b);
+        }
     }
 }

@@ -376,3 +376,438 @@ fn the_whole_read_order_is_now_then_level_then_frames() {
         assert_read_order(q, o, &policy);
     }
 }
+
+/// A painter that paints nothing real: every cluster gets an "atlas" of a few bytes (the
+/// prefetcher never decodes it) and grey faces, so the database has textured boxes.
+struct FakePainter;
+
+impl portico_data::hierarchy::ImpostorPainter for FakePainter {
+    fn paint(
+        &mut self,
+        _: &[portico_data::hierarchy::PaintItem<'_>],
+        _: &portico_data::geometry::Aabb,
+        _: u32,
+    ) -> Result<(Vec<u8>, [[f32; 4]; 6]), String> {
+        Ok((b"\x89PNG fake atlas".to_vec(), [[0.5, 0.5, 0.5, 1.0]; 6]))
+    }
+}
+
+/// The tiny building with textured cluster boxes.
+fn with_impostors() -> &'static Prefetcher {
+    static P: OnceLock<Prefetcher> = OnceLock::new();
+    P.get_or_init(|| {
+        let params = portico_generator::Params {
+            preset: portico_generator::Preset::Tiny,
+            seed: 5,
+            floors: Some(2),
+        };
+        let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
+        let dir = tempfile::tempdir().unwrap();
+        let glb = dir.path().join("tiny.glb");
+        std::fs::write(&glb, &b.glb).unwrap();
+        let out = dir.path().join("tiny.portico");
+        portico_data::build::build_with(
+            import_file(&glb).unwrap(),
+            &out,
+            &BuildOptions::default(),
+            &Quiet,
+            Some(&mut FakePainter),
+        )
+        .unwrap();
+        Prefetcher::new(Arc::new(Database::open(&out).unwrap())).unwrap()
+    })
+}
+
+/// Maciel & Shirley's textured boxes come before any geometry, once each, never for a cluster
+/// that holds the eye, the view's first; without `impostors` none is listed.
+#[test]
+fn cluster_textures_come_first_once_each_and_never_around_the_eye() {
+    let p = with_impostors();
+    let h = p
+        .database()
+        .header()
+        .hierarchy
+        .clone()
+        .expect("a hierarchy");
+    let policy = Policy {
+        impostors: true,
+        read_bytes: 1 << 30,
+        range_cull: RangeCull::Any,
+        ..Policy::default()
+    };
+    let mut listed = 0;
+    for obs in observers(p) {
+        let r = p.answer(&obs, &policy, &HashSet::new()).unwrap();
+        let kinds: Vec<NeedKind> = r.items.iter().map(|i| i.kind).collect();
+        let first_geo = kinds.iter().position(|k| *k == NeedKind::Geometry);
+        let textures: Vec<&portico_protocol::NeedItem> = r
+            .items
+            .iter()
+            .filter(|i| i.kind == NeedKind::Texture)
+            .collect();
+        listed += textures.len();
+        if let Some(g) = first_geo {
+            assert!(
+                kinds[g..].iter().all(|k| *k == NeedKind::Geometry),
+                "a texture after geometry"
+            );
+        }
+        let unique: HashSet<u32> = textures.iter().map(|t| t.segment).collect();
+        assert_eq!(unique.len(), textures.len(), "a texture listed twice");
+        let eye = Vec3::from(obs.eye);
+        let around = |b: &portico_data::geometry::Aabb| {
+            (0..3).all(|k| b.min[k] <= eye[k] && eye[k] <= b.max[k])
+        };
+        // What the view needs first comes first: frames until visible never decrease.
+        assert!(
+            textures.windows(2).all(|w| w[0].frames <= w[1].frames),
+            "textures out of need order"
+        );
+        for t in &textures {
+            let node = h
+                .nodes
+                .iter()
+                .find(|n| n.texture == t.segment)
+                .expect("a cluster's texture");
+            assert!(!around(&node.bounds), "the box of a cluster around the eye");
+            // The clusters above a listed one are listed too (a coarser view of the same place),
+            // unless they hold the eye or have no texture.
+            if let Some(parent) = h.nodes.get(node.parent as usize)
+                && parent.texture != u32::MAX
+                && !around(&parent.bounds)
+            {
+                assert!(
+                    unique.contains(&parent.texture),
+                    "a cluster listed without its parent"
+                );
+            }
+            assert_eq!(t.bytes, p.database().segments()[t.segment as usize].length);
+            assert!(!p.is_geometry(t.segment));
+        }
+        let plain = Policy {
+            impostors: false,
+            ..policy
+        };
+        let r = p.answer(&obs, &plain, &HashSet::new()).unwrap();
+        assert!(r.items.iter().all(|i| i.kind != NeedKind::Texture));
+    }
+    assert!(listed > 0, "no observer was sent a single texture");
+}
+
+/// The deadline: an answer that cannot finish in time is an error, not a late answer.
+#[test]
+fn a_budget_past_its_deadline_stops_the_answer() {
+    use portico_data::prefetch::Budget;
+    use std::time::{Duration, Instant};
+    let p = prefetcher(false);
+    let obs = observers(p)[0];
+    let past = Budget::until(Instant::now() - Duration::from_millis(1));
+    assert!(past.check().is_err());
+    let e = p
+        .answer_within(&obs, &Policy::default(), &HashSet::new(), &past)
+        .unwrap_err();
+    assert!(matches!(e, portico_data::DataError::Deadline(_)), "{e}");
+    let later = Budget::until(Instant::now() + Duration::from_secs(60));
+    assert!(later.check().is_ok());
+    assert!(
+        p.answer_within(&obs, &Policy::default(), &HashSet::new(), &later)
+            .is_ok()
+    );
+    assert!(Budget::unlimited().check().is_ok());
+    std::thread::sleep(Duration::from_millis(5));
+    assert!(later.elapsed() >= Duration::from_millis(5));
+}
+
+/// Sizes, kinds and the statistics of an answer are the database's: every item's bytes are its
+/// segment's, stab lists are stab-list segments, the lookahead bytes are the distinct segments'
+/// sum, and a cut at the read budget is a prefix of the uncut answer (nothing after the cut).
+#[test]
+fn answers_carry_the_segments_sizes_and_cut_as_a_prefix() {
+    let p = prefetcher(false);
+    let db = p.database();
+    let g = p.graph().unwrap();
+    let unlimited = Policy {
+        read_bytes: 1 << 30,
+        range_cull: RangeCull::Any,
+        ..Policy::default()
+    };
+    for obs in observers(p) {
+        let full = p.answer(&obs, &unlimited, &HashSet::new()).unwrap();
+        let mut sum = 0;
+        for i in &full.items {
+            assert_eq!(i.bytes, db.segments()[i.segment as usize].length);
+            assert_eq!(i.kind == NeedKind::Geometry, p.is_geometry(i.segment));
+            sum += i.bytes;
+        }
+        // Nothing held and no cut: the read set is the lookahead set.
+        assert_eq!(full.lookahead_bytes, sum);
+        assert!(full.lookahead_objects > 0);
+        let eye_cell = g.locate(Vec3::from(obs.eye)).unwrap();
+        let stab = p.stab_segment(eye_cell).expect("the eye cell's stab list");
+        assert!(
+            full.items
+                .iter()
+                .any(|i| i.segment == stab && i.kind == NeedKind::Stab)
+        );
+        // Cut just short of each of the first optional items in turn: what is read is the full
+        // order up to the cut, plus only mandatory items after it — never a later, smaller
+        // item that would still fit.
+        for item in full.items.iter().filter(|i| i.frames > 0).take(12) {
+            // Everything before it counts against the read budget, mandatory items included.
+            let before: u64 = full
+                .items
+                .iter()
+                .take_while(|i| i.segment != item.segment)
+                .map(|i| i.bytes)
+                .sum();
+            let cut = Policy {
+                read_bytes: before + item.bytes - 1,
+                ..unlimited
+            };
+            let part = p.answer(&obs, &cut, &HashSet::new()).unwrap();
+            let part_ids: HashSet<u32> = part.items.iter().map(|i| i.segment).collect();
+            assert!(
+                !part_ids.contains(&item.segment),
+                "the item at the cut was read"
+            );
+            assert!(part.truncated);
+            let at = full
+                .items
+                .iter()
+                .position(|i| i.segment == item.segment)
+                .unwrap();
+            for (k, i) in full.items.iter().enumerate() {
+                let read = part_ids.contains(&i.segment);
+                if k < at {
+                    assert!(read, "an item before the cut was not read");
+                } else if i.frames > 0 {
+                    assert!(!read, "an optional item after the cut was read");
+                }
+            }
+            assert_eq!(part.lookahead_bytes, full.lookahead_bytes);
+            assert_eq!(part.lookahead_objects, full.lookahead_objects);
+        }
+    }
+    assert!(format!("{p:?}").starts_with("Prefetcher"));
+    assert_eq!(p.stab_segment(u32::MAX), None);
+    assert!(!p.is_geometry(u32::MAX));
+}
+
+/// §5.2.2's size: the disc of an object's bounding sphere on the screen, in pixels.
+#[test]
+fn projected_pixels_are_the_bounding_discs_area_capped_at_the_screen() {
+    use portico_data::prefetch::lookahead::projected_pixels;
+    let policy = Policy {
+        screen: [640, 480],
+        ..Policy::default()
+    };
+    // A box whose bounding sphere has radius 1 m, seen with tan(half fov) = 1: 240 px per
+    // metre at 1 m, so 24 px of radius at 10 m.
+    let side = 2.0 / 3f32.sqrt();
+    let b = portico_data::geometry::Aabb {
+        min: [0.0; 3],
+        max: [side; 3],
+    };
+    let quarter = std::f32::consts::FRAC_PI_4;
+    let px = projected_pixels(&b, 10.0, &policy, quarter);
+    let want = std::f32::consts::PI * 24.0 * 24.0;
+    assert!((px - want).abs() < want * 1e-3, "{px} vs {want}");
+    // Twice as far, a quarter of the area; inside the sphere, the whole screen.
+    let far = projected_pixels(&b, 20.0, &policy, quarter);
+    assert!((far * 4.0 - px).abs() < px * 1e-3, "{far}");
+    assert_eq!(projected_pixels(&b, 0.5, &policy, quarter), 640.0 * 480.0);
+    // Just outside the sphere the disc (π·237.6² px) is still under the screen: not capped.
+    let near = projected_pixels(&b, 1.01, &policy, quarter);
+    assert!(near < 640.0 * 480.0 && near > 170_000.0, "{near}");
+    // A wider view shows the same box smaller.
+    assert!(projected_pixels(&b, 10.0, &policy, 1.0) < px);
+}
+
+fn lods(triangles: &[u32]) -> Vec<portico_data::format::LodRecord> {
+    triangles
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| portico_data::format::LodRecord {
+            segment: i as u32,
+            triangles: t,
+            vertices: t,
+            error: 0.0,
+        })
+        .collect()
+}
+
+/// The static size threshold caps an object's LOD (Funkhouser §4.2.4, §5.2.2): the finest LOD
+/// whose average triangle covers at least the threshold, else the coarsest.
+#[test]
+fn the_size_threshold_picks_the_finest_lod_with_triangles_big_enough() {
+    use portico_data::prefetch::lookahead::max_lod;
+    let l = lods(&[1000, 100, 12]);
+    // 10,000 pixels: 10 px per triangle at LOD 0, 100 at LOD 1, 833 at LOD 2.
+    assert_eq!(max_lod(&l, 10_000.0, 10.0), 0);
+    assert_eq!(max_lod(&l, 10_000.0, 10.5), 1);
+    assert_eq!(max_lod(&l, 10_000.0, 100.0), 1);
+    assert_eq!(max_lod(&l, 10_000.0, 101.0), 2);
+    assert_eq!(
+        max_lod(&l, 10_000.0, 1e6),
+        2,
+        "none is big enough: the coarsest"
+    );
+    assert_eq!(max_lod(&l, 10_000.0, 0.0), 0);
+    assert_eq!(max_lod(&[], 10.0, 1.0), 0);
+}
+
+/// Over the observer range, the nearest point decides: near objects may need their finest LOD,
+/// far ones only a coarse one, and an object the range reaches into its finest.
+#[test]
+fn the_nearest_point_of_the_range_sets_each_objects_lod_cap() {
+    use portico_data::prefetch::lookahead::max_lod_in_range;
+    use portico_data::prefetch::range::ObserverRange;
+    let policy = Policy {
+        screen: [640, 480],
+        size_threshold_px: 64.0,
+        frame_time_s: 0.05,
+        depth_frames: 20,
+        ..Policy::default()
+    };
+    let obs = Observer {
+        eye: [0.0, 1.5, 0.0],
+        dir: [1.0, 0.0, 0.0],
+        up: [0.0, 1.0, 0.0],
+        velocity: [0.0; 3],
+        half_fov_x: 0.6,
+        half_fov_y: 0.45,
+        max_speed: 2.0,
+        max_turn: 1.0,
+    };
+    let range = ObserverRange::new(&obs, &policy);
+    // 2 m/s for 20 frames of 50 ms: the observer may come 2 m closer.
+    assert!((range.radius - 2.0).abs() < 1e-3, "{}", range.radius);
+    let l = lods(&[20_000, 2_000, 200, 12]);
+    let at = |x: f32| portico_data::geometry::Aabb {
+        min: [x, 1.0, -0.5],
+        max: [x + 1.0, 2.0, 0.5],
+    };
+    let caps: Vec<usize> = [2.5, 5.0, 40.0, 400.0]
+        .iter()
+        .map(|&x| max_lod_in_range(&l, &at(x), &range, &policy, obs.half_fov_y))
+        .collect();
+    // Within reach the object may fill the screen: 307,200 px over 20,000 triangles is 15 px
+    // each, under the 64 px threshold; LOD 1's 2,000 give 154 px each.
+    assert_eq!(
+        caps[0], 1,
+        "within reach: the finest the full screen allows"
+    );
+    let fine = Policy {
+        size_threshold_px: 10.0,
+        ..policy
+    };
+    assert_eq!(
+        max_lod_in_range(&l, &at(2.5), &range, &fine, obs.half_fov_y),
+        0
+    );
+    assert!(
+        caps.windows(2).all(|w| w[0] <= w[1]),
+        "farther never finer: {caps:?}"
+    );
+    assert_eq!(caps[3], 3, "far away: the coarsest");
+    // 3 m away at the nearest: a 143 px disc, 64,600 px; LOD 2 gives 323 px a triangle.
+    assert_eq!(caps[1], 2, "{caps:?}");
+}
+
+/// Dijkstra over the portals in frames-to-enter (§5.2.1): the eye's cell first at 0, frames
+/// never decreasing, never past the depth, live cells only, never before the observer could
+/// reach the cell, and every neighbour reachable in time included.
+#[test]
+fn range_cells_are_the_cells_reachable_in_time_nearest_first() {
+    use portico_data::prefetch::range::{ObserverRange, range_cells, start_cell};
+    let p = prefetcher(false);
+    let g = p.graph().unwrap();
+    for obs in observers(p) {
+        let policy = Policy {
+            frame_time_s: 0.05,
+            depth_frames: 40,
+            ..Policy::default()
+        };
+        let r = ObserverRange::new(&obs, &policy);
+        let cells = range_cells(g, &r, RangeCull::Any);
+        let start = start_cell(g, Vec3::from(obs.eye)).unwrap();
+        assert_eq!(cells[0], (start, 0));
+        assert!(
+            cells.windows(2).all(|w| w[0].1 <= w[1].1),
+            "frames decrease"
+        );
+        let listed: std::collections::HashMap<u32, u32> = cells.iter().copied().collect();
+        assert_eq!(listed.len(), cells.len(), "a cell twice");
+        for &(c, f) in &cells {
+            assert!(g.cells[c as usize].live);
+            assert!(f <= r.depth);
+            assert!(f >= r.frames_to(&g.cells[c as usize].bounds).min(r.depth));
+        }
+        // Every live neighbour of a range cell whose portal can be reached in time is in.
+        for &(c, f) in &cells {
+            for &pi in &g.cells[c as usize].portals {
+                let portal = &g.portals[pi as usize];
+                let next = portal.other(c);
+                let t = f.max(r.frames_to(&portal.rect));
+                if g.cells[next as usize].live && t <= r.depth {
+                    assert!(listed.get(&next).is_some_and(|&n| n <= t), "cell {next}");
+                }
+            }
+        }
+        // The culls only remove cells; a standing observer has only the cells around its eye.
+        for cull in [RangeCull::Plane, RangeCull::Frustum, RangeCull::Direction] {
+            let some = range_cells(g, &r, cull);
+            assert!(some.iter().all(|c| listed.contains_key(&c.0)), "{cull:?}");
+            assert_eq!(some[0], (start, 0));
+        }
+        let still = ObserverRange::new(
+            &Observer {
+                max_speed: 0.0,
+                ..obs
+            },
+            &policy,
+        );
+        assert!(
+            range_cells(g, &still, RangeCull::Any)
+                .iter()
+                .all(|c| c.1 == 0)
+        );
+    }
+}
+
+/// §5.2.2 condition 2: the lookahead stops once it claims more than the client's cache, but
+/// never before everything visible now is in; a smaller cache never gets a bigger lookahead.
+#[test]
+fn the_lookahead_stops_at_the_cache_size_but_keeps_the_view() {
+    for no_cells in [false, true] {
+        let p = prefetcher(no_cells);
+        let mut stopped = 0;
+        for obs in observers(prefetcher(false)) {
+            let mut sizes = Vec::new();
+            for cache in [1u64, 64 << 10, 1 << 20, 1 << 30] {
+                let policy = Policy {
+                    cache_bytes: cache,
+                    read_bytes: 1 << 30,
+                    range_cull: RangeCull::Any,
+                    depth_frames: 64,
+                    ..Policy::default()
+                };
+                let r = p.answer(&obs, &policy, &HashSet::new()).unwrap();
+                assert!(
+                    r.items.iter().any(|i| i.kind == NeedKind::Geometry),
+                    "nothing at all for a {cache}-byte cache"
+                );
+                sizes.push(r.lookahead_bytes);
+            }
+            assert!(
+                sizes.windows(2).all(|w| w[0] <= w[1]),
+                "no_cells {no_cells}: {sizes:?}"
+            );
+            stopped += usize::from(sizes[0] < sizes[3]);
+        }
+        assert!(
+            stopped > 0,
+            "no_cells {no_cells}: the cache never stopped a lookahead"
+        );
+    }
+}

@@ -194,3 +194,7 @@ pub fn range_cells(graph: &CellGraph, range: &ObserverRange, cull: RangeCull) ->
 pub fn overlaps(a: &Aabb, b: &Aabb) -> bool {
     touches(a, b)
 }
+
+#[cfg(test)]
+#[path = "range_tests.rs"]
+mod tests;
