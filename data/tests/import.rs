@@ -81,6 +81,8 @@ const REFUSED: &[(&str, &str)] = &[
         "contains no triangle meshes",
     ),
     ("OBJ/testpoints.obj", "contains no triangle meshes"),
+    // A polyline: tobj made a triangle of its three points.
+    ("OBJ/testline.obj", "contains no triangle meshes"),
     ("invalid/empty.obj", "contains no triangle meshes"),
     (
         "invalid/malformed.obj",

@@ -100,8 +100,12 @@ pub fn obj(src: &str) -> Result<Text, String> {
                     out.warnings
                         .push(format!("line {line_no}: '{kw}' without vertices, skipped"));
                     String::new()
-                } else {
+                } else if kw == "f" {
                     fields.join(" ")
+                } else {
+                    // Points and lines are never drawn; dropped here, because tobj reads a
+                    // polyline of three or more points as a face even with `ignore_lines`.
+                    String::new()
                 }
             }
             Some("usemtl") if words.next().is_none() => {
