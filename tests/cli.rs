@@ -2,24 +2,10 @@
 //! inspect → verify → cull, and bad input giving one-line errors and no output file.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn portico(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_portico"))
-        .args(args)
-        .output()
-        .expect("run portico")
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = portico(args);
-    assert!(
-        out.status.success(),
-        "portico {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).expect("utf-8")
-}
+mod common;
+use common::{ok, portico, s};
 
 /// Runs a command that must fail; returns its stderr (checked to be one `error:` line).
 fn fails(args: &[&str]) -> String {
@@ -30,10 +16,6 @@ fn fails(args: &[&str]) -> String {
     assert_eq!(err.lines().count(), 1, "not one line: {err}");
     assert!(!err.contains("panicked"), "{err}");
     err
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
 }
 
 fn generated(dir: &Path) -> PathBuf {

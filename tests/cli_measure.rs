@@ -4,28 +4,10 @@
 
 use std::io::BufRead;
 use std::path::Path;
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, Command, Stdio};
 
-fn portico(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_portico"))
-        .args(args)
-        .output()
-        .expect("run portico")
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = portico(args);
-    assert!(
-        out.status.success(),
-        "portico {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).expect("utf-8")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().expect("utf-8 path")
-}
+mod common;
+use common::{ok, s};
 
 /// `portico serve` on a free port; the child (killed on drop) and its base URL.
 struct Server(Child, String);

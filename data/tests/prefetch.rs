@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 use portico_data::Database;
-use portico_data::build::{BuildOptions, Quiet, build};
+use portico_data::build::{BuildOptions, Quiet};
 use portico_data::cells::realtime::{Frustum, eye_to_cell, eye_to_object};
 use portico_data::import::import_file;
 use portico_data::prefetch::Prefetcher;
@@ -15,26 +15,34 @@ fn prefetcher(no_cells: bool) -> &'static Prefetcher {
     static WITH: OnceLock<Prefetcher> = OnceLock::new();
     static WITHOUT: OnceLock<Prefetcher> = OnceLock::new();
     let slot = if no_cells { &WITHOUT } else { &WITH };
-    slot.get_or_init(|| {
-        let params = portico_generator::Params {
-            preset: portico_generator::Preset::Tiny,
-            seed: 5,
-            floors: Some(2),
-        };
-        let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
-        let dir = tempfile::tempdir().unwrap();
-        let glb = dir.path().join("tiny.glb");
-        std::fs::write(&glb, &b.glb).unwrap();
-        let out = dir.path().join("tiny.portico");
-        let opts = BuildOptions {
-            no_cells,
-            ..BuildOptions::default()
-        };
-        build(import_file(&glb).unwrap(), &out, &opts, &Quiet).unwrap();
-        // The map stays valid after the directory is removed (the inode lives on).
-        let db = Arc::new(Database::open(&out).unwrap());
-        Prefetcher::new(db).unwrap()
-    })
+    slot.get_or_init(|| tiny(no_cells, None))
+}
+
+/// The tiny building (seed 5, two storeys) built into a temporary directory, with or without
+/// cells, its clusters painted by `painter` if given.
+fn tiny(
+    no_cells: bool,
+    painter: Option<&mut dyn portico_data::hierarchy::ImpostorPainter>,
+) -> Prefetcher {
+    let params = portico_generator::Params {
+        preset: portico_generator::Preset::Tiny,
+        seed: 5,
+        floors: Some(2),
+    };
+    let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
+    let dir = tempfile::tempdir().unwrap();
+    let glb = dir.path().join("tiny.glb");
+    std::fs::write(&glb, &b.glb).unwrap();
+    let out = dir.path().join("tiny.portico");
+    let opts = BuildOptions {
+        no_cells,
+        ..BuildOptions::default()
+    };
+    portico_data::build::build_with(import_file(&glb).unwrap(), &out, &opts, &Quiet, painter)
+        .unwrap();
+    // The map stays valid after the directory is removed (the inode lives on).
+    let db = Arc::new(Database::open(&out).unwrap());
+    Prefetcher::new(db).unwrap()
 }
 
 /// Observers standing in the middle of live cells, looking along +x, -x, +z.
@@ -395,27 +403,7 @@ impl portico_data::hierarchy::ImpostorPainter for FakePainter {
 /// The tiny building with textured cluster boxes.
 fn with_impostors() -> &'static Prefetcher {
     static P: OnceLock<Prefetcher> = OnceLock::new();
-    P.get_or_init(|| {
-        let params = portico_generator::Params {
-            preset: portico_generator::Preset::Tiny,
-            seed: 5,
-            floors: Some(2),
-        };
-        let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
-        let dir = tempfile::tempdir().unwrap();
-        let glb = dir.path().join("tiny.glb");
-        std::fs::write(&glb, &b.glb).unwrap();
-        let out = dir.path().join("tiny.portico");
-        portico_data::build::build_with(
-            import_file(&glb).unwrap(),
-            &out,
-            &BuildOptions::default(),
-            &Quiet,
-            Some(&mut FakePainter),
-        )
-        .unwrap();
-        Prefetcher::new(Arc::new(Database::open(&out).unwrap())).unwrap()
-    })
+    P.get_or_init(|| tiny(false, Some(&mut FakePainter)))
 }
 
 /// Maciel & Shirley's textured boxes come before any geometry, once each, never for a cluster

@@ -50,3 +50,27 @@ pub fn serve_tiny(dir: &Path) -> (String, Arc<AppState>, PathBuf) {
     });
     (rx.recv().unwrap(), state, db)
 }
+
+/// Runs the `portico` binary with `args`.
+pub fn portico(args: &[&str]) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_portico"))
+        .args(args)
+        .output()
+        .expect("run portico")
+}
+
+/// Runs a command that must succeed; returns its stdout.
+pub fn ok(args: &[&str]) -> String {
+    let out = portico(args);
+    assert!(
+        out.status.success(),
+        "portico {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("utf-8")
+}
+
+/// A path as a command-line argument.
+pub fn s(p: &Path) -> &str {
+    p.to_str().expect("utf-8 path")
+}
