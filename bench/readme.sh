@@ -1,0 +1,94 @@
+#!/usr/bin/env bash
+# The README's Performance figures for `soda`, by the commands written in its table, in order.
+#
+#   bench/readme.sh [DIR] [--sweep] [--mega]
+#
+# DIR (default readme-figures/) receives the models and every command's output; each step
+# prints its command and wall time. The policy sweep (about 5 minutes) and `mega` (about
+# 10 minutes) run only when asked. Needs a release build (`cargo build --release`) and curl;
+# uses port 7878 as the README does. About 15 minutes on 2 cores without the options.
+set -euo pipefail
+root=$(cd "$(dirname "$0")/.." && pwd)
+bin=${PORTICO:-$root/target/release/portico}
+[ -x "$bin" ] || { echo "error: no $bin: run cargo build --release first" >&2; exit 1; }
+portico() { "$bin" "$@"; }
+
+dir=readme-figures sweep= mega=
+for a in "$@"; do
+  case $a in
+    --sweep) sweep=1 ;;
+    --mega) mega=1 ;;
+    -*) echo "error: unknown option $a" >&2; exit 2 ;;
+    *) dir=$a ;;
+  esac
+done
+mkdir -p "$dir" && cd "$dir"
+
+server=
+stop() { [ -n "$server" ] && kill "$server" 2>/dev/null && wait "$server" 2>/dev/null; server=; true; }
+trap stop EXIT
+# `portico serve F` in the background, on the README's port; returns once /healthz answers.
+serve() {
+  stop
+  portico serve "$1" >"serve-$(basename "$1").log" 2>&1 &
+  server=$!
+  for _ in $(seq 100); do
+    curl -fs http://127.0.0.1:7878/healthz >/dev/null 2>&1 && return
+    sleep 0.1
+  done
+  echo "error: portico serve $1 did not answer on 127.0.0.1:7878" >&2
+  exit 1
+}
+# Prints the command, runs it, prints its wall time and peak RSS.
+step() {
+  echo
+  echo "== portico $*"
+  /usr/bin/time -f "== %e s, %M KB peak RSS" "$bin" "$@"
+}
+
+step generate --preset soda -o soda.glb
+step build soda.glb -o soda.portico
+step build soda.glb -o soda.nohier.portico --no-hierarchy
+step build soda.glb -o soda.flat.portico --flatten
+ls -l soda.glb soda.portico soda.nohier.portico soda.flat.portico
+step inspect soda.portico
+step path --db soda.portico --kind tour --legs 6 -o tour.json
+step verify soda.portico --rays 50000
+step cull soda.portico --tour 20
+
+serve soda.portico
+step loadtest --path tour.json --stress 1,16,64 -o st
+step loadtest --path tour.json --stress 1,16,64 -o st-closed --closed-loop
+
+serve soda.flat.portico
+step walk --server http://127.0.0.1:7878 --path tour.json --cache-mb 64 --max-frames 2400 -o w64
+step walk --server http://127.0.0.1:7878 --path tour.json --cache-mb 8 --max-frames 2400 -o w8
+step walk --server http://127.0.0.1:7878 --elision optimize --max-frames 600 -o w-optimize
+step walk --server http://127.0.0.1:7878 --elision impostors --max-frames 600 -o w-impostors
+step loadtest --clients 8 --path tour.json --policy depth=16,gran=object,range=frustum,look=any -o lt
+step loadtest --clients 8 --path tour.json --policy depth=16,gran=object,range=frustum,look=any,imp=1 -o lt-imp
+if [ -n "$sweep" ]; then
+  step loadtest --clients 8 --path tour.json --sweep --link rtt=20ms,rate=100mbit -o lt_sweep
+fi
+stop
+
+step bench --db soda.portico --path tour.json --size 640x480 --max-frames 400 --budget-ms 50 -o b
+step bench --db soda.portico --path tour.json --size 640x480 --max-frames 400 --budget-ms 4 -o b4
+for ms in 50 6 4; do
+  step bench --db soda.portico --path tour.json --max-frames 400 \
+    --algorithms regular,optimize,impostors --budget-ms "$ms" -o "bi$ms"
+done
+
+if [ -n "$mega" ]; then
+  step generate --preset mega -o mega.glb
+  step build mega.glb -o mega.portico
+  step build mega.glb -o mega.nohier.portico --no-hierarchy
+  ls -l mega.glb mega.portico mega.nohier.portico
+  step path --db mega.portico --kind tour --legs 6 -o mtour.json
+  for ms in 50 6; do
+    step bench --db mega.portico --path mtour.json --max-frames 400 \
+      --algorithms regular,optimize,impostors --budget-ms "$ms" -o "mbi$ms"
+  done
+fi
+echo
+echo "== done: every command above is the README's; outputs in $PWD"
