@@ -74,6 +74,15 @@ fn a_loadtest_measures_the_policy_and_both_baselines_and_writes_its_report() {
             p.cache_budget_bytes
         );
         assert!(p.bytes_wasted <= p.bytes_fetched, "{}", p.name);
+        // Summed over the clients in `bytes_fetched`, averaged in the per-client figure the
+        // reports show.
+        assert_eq!(
+            p.bytes_fetched_per_client,
+            p.bytes_fetched / 3,
+            "{}",
+            p.name
+        );
+        assert_eq!(p.bytes_wasted_per_client, p.bytes_wasted / 3, "{}", p.name);
         assert!((0.0..=1.0).contains(&p.cache_hit_rate), "{}", p.name);
         assert!(p.latency_p50_s <= p.latency_p95_s && p.latency_p95_s <= p.latency_p99_s);
         // Every arrival paid at least the round trip of the emulated link.
@@ -119,6 +128,7 @@ fn a_loadtest_measures_the_policy_and_both_baselines_and_writes_its_report() {
     let report = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(report.contains("Look Depth") && report.contains("LODs Skipped"));
     assert!(report.contains("demand") && report.contains("oracle"));
+    assert!(report.contains("MB fetched per client"), "{report}");
     for png in ["lods_skipped.png", "lookahead_mb.png"] {
         let img = image::open(out.join(png)).unwrap_or_else(|e| panic!("{png}: {e}"));
         assert!(img.width() > 100 && img.height() > 100);

@@ -188,9 +188,9 @@ pub fn loadtest(s: &LoadtestSummary) -> Vec<Verdict> {
             "bytes fetched, prefetch",
             "≤ 2× the oracle's".into(),
             format!(
-                "{:.1} MB vs {:.1} MB ({ratio:.1}×)",
-                p.bytes_fetched as f64 / 1e6,
-                o.bytes_fetched as f64 / 1e6
+                "{:.1} MB vs {:.1} MB per client ({ratio:.1}×)",
+                p.bytes_fetched_per_client as f64 / 1e6,
+                o.bytes_fetched_per_client as f64 / 1e6
             ),
             ratio <= 2.0,
             if ratio <= 2.0 {

@@ -348,7 +348,7 @@ fn loadtest_section(s: &LoadtestSummary) -> String {
     );
     let _ = writeln!(
         r,
-        "| run | LODs skipped/frame (mean, max) | objects skipped/frame | cache hit rate | MB fetched | MB never drawn | request->resident p50 / p99 ms |\n|---|---|---|---|---|---|---|"
+        "| run | LODs skipped/frame (mean, max) | objects skipped/frame | cache hit rate | MB fetched per client | MB never drawn per client | request->resident p50 / p99 ms |\n|---|---|---|---|---|---|---|"
     );
     for p in &s.policies {
         let _ = writeln!(
@@ -359,8 +359,8 @@ fn loadtest_section(s: &LoadtestSummary) -> String {
             p.lods_skipped_max,
             p.objects_skipped_mean,
             p.cache_hit_rate,
-            p.bytes_fetched as f64 / 1e6,
-            p.bytes_wasted as f64 / 1e6,
+            p.bytes_fetched_per_client as f64 / 1e6,
+            p.bytes_wasted_per_client as f64 / 1e6,
             p.latency_p50_s * 1e3,
             p.latency_p99_s * 1e3
         );

@@ -212,7 +212,7 @@ pub fn print_summary(s: &LoadtestSummary, out: &std::path::Path) {
     );
     println!(
         "  {:<44} {:>11} {:>9} {:>8} {:>9} {:>9} {:>14}",
-        "run", "LODs skip", "objs skip", "hit", "MB fetch", "MB waste", "lat p50/p99 ms"
+        "run", "LODs skip", "objs skip", "hit", "MB/client", "MB waste", "lat p50/p99 ms"
     );
     for p in &s.policies {
         println!(
@@ -222,8 +222,8 @@ pub fn print_summary(s: &LoadtestSummary, out: &std::path::Path) {
             p.lods_skipped_max,
             p.objects_skipped_mean,
             p.cache_hit_rate,
-            p.bytes_fetched as f64 / 1e6,
-            p.bytes_wasted as f64 / 1e6,
+            p.bytes_fetched_per_client as f64 / 1e6,
+            p.bytes_wasted_per_client as f64 / 1e6,
             p.latency_p50_s * 1e3,
             p.latency_p99_s * 1e3
         );

@@ -424,12 +424,17 @@ mod tests {
                 indices: vec![0, 1, 2, 0, 3, 1],
             };
             let set = critical_vertices(&m, &CriticalParams::default());
-            let on_fold = set
+            let fold: Vec<_> = set
                 .vertices
                 .iter()
                 .filter(|v| v.position.x == 0.0)
-                .all(|v| v.extremum == sharp);
-            assert!(on_fold, "{angle_deg}°: {:?}", set.vertices);
+                .collect();
+            assert_eq!(fold.len(), 2, "{angle_deg}°: {:?}", set.vertices);
+            assert!(
+                fold.iter().all(|v| v.extremum == sharp),
+                "{angle_deg}°: {:?}",
+                set.vertices
+            );
         }
     }
 }

@@ -28,6 +28,7 @@ pub(super) fn aggregate(
         .collect();
     let lat = Series::of(&latencies);
     let sum = |f: &dyn Fn(&ClientResult) -> u64| clients.iter().map(f).sum::<u64>();
+    let n_clients = clients.len().max(1) as u64;
     let wanted: u64 = rows.iter().map(|r| r.wanted as u64).sum();
     let hits: u64 = rows.iter().map(|r| r.hits as u64).sum();
     let (lods, objects, deficit) = (
@@ -85,8 +86,10 @@ pub(super) fn aggregate(
         fallback_frames: rows.iter().filter(|r| r.fallback).count() as u64,
         outside_frames: rows.iter().filter(|r| r.outside).count() as u64,
         bytes_fetched: sum(&|c| c.bytes_fetched),
+        bytes_fetched_per_client: sum(&|c| c.bytes_fetched) / n_clients,
         segments_fetched: sum(&|c| c.segments_fetched),
         bytes_wasted: sum(&|c| c.bytes_wasted),
+        bytes_wasted_per_client: sum(&|c| c.bytes_wasted) / n_clients,
         cache_hit_rate: if wanted == 0 {
             1.0
         } else {

@@ -114,7 +114,7 @@ fn headline(r: &mut String, s: &LoadtestSummary) {
     let _ = writeln!(r, "## Prefetch against the baselines\n");
     let _ = writeln!(
         r,
-        "| run | LODs skipped mean | max | objects skipped mean | LOD deficit mean | after {:.0} s warm-up: LODs / objects / deficit | hit rate | fetched MB | wasted MB |\n|---|---|---|---|---|---|---|---|---|",
+        "| run | LODs skipped mean | max | objects skipped mean | LOD deficit mean | after {:.0} s warm-up: LODs / objects / deficit | hit rate | MB fetched per client | MB never drawn per client |\n|---|---|---|---|---|---|---|---|---|",
         super::WARMUP_S
     );
     let oracle = s.get("oracle");
@@ -131,8 +131,8 @@ fn headline(r: &mut String, s: &LoadtestSummary) {
             opt(p.objects_skipped_warm_mean),
             opt(p.lod_deficit_warm_mean),
             p.cache_hit_rate,
-            mb(p.bytes_fetched),
-            mb(p.bytes_wasted)
+            mb(p.bytes_fetched_per_client),
+            mb(p.bytes_wasted_per_client)
         );
     }
     let _ = writeln!(
@@ -335,7 +335,7 @@ fn network_table(r: &mut String, s: &LoadtestSummary) {
     let _ = writeln!(
         r,
         "## Network, cache and server\n\n\
-         | run | objects skipped mean | LOD deficit mean / max | hit rate | fetched MB | wasted MB | latency p50 / p95 / p99 ms | prefetch req/s | segments/s | lookahead MB mean / max | compute ms mean / max | server CPU s (cores) | cache peak / budget MiB | LODs skipped vs demand |\n\
+         | run | objects skipped mean | LOD deficit mean / max | hit rate | MB fetched per client | MB never drawn per client | latency p50 / p95 / p99 ms | prefetch req/s | segments/s | lookahead MB mean / max | compute ms mean / max | server CPU s (cores) | cache peak / budget MiB | LODs skipped vs demand |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|---|---|"
     );
     for p in &s.policies {
@@ -350,8 +350,8 @@ fn network_table(r: &mut String, s: &LoadtestSummary) {
             p.lod_deficit_mean,
             p.lod_deficit_max,
             p.cache_hit_rate,
-            mb(p.bytes_fetched),
-            mb(p.bytes_wasted),
+            mb(p.bytes_fetched_per_client),
+            mb(p.bytes_wasted_per_client),
             p.latency_p50_s * 1e3,
             p.latency_p95_s * 1e3,
             p.latency_p99_s * 1e3,

@@ -123,12 +123,17 @@ pub struct PolicyResult {
     /// Frames whose eye was in no live cell (frustum culling whatever the cache holds: the
     /// client then wants objects no cell-based lookahead lists).
     pub outside_frames: u64,
-    /// Segment bytes fetched.
+    /// Segment bytes fetched, all clients together.
     pub bytes_fetched: u64,
-    /// Segments fetched.
+    /// Segment bytes fetched per client (`bytes_fetched` over the clients), mean.
+    pub bytes_fetched_per_client: u64,
+    /// Segments fetched, all clients together.
     pub segments_fetched: u64,
-    /// Fetched bytes never drawn (released, left at the end, or fetched twice).
+    /// Fetched bytes never drawn (released, left at the end, or fetched twice), all clients
+    /// together.
     pub bytes_wasted: u64,
+    /// Fetched bytes never drawn per client, mean.
+    pub bytes_wasted_per_client: u64,
     /// Of the LODs the elider wanted, the fraction resident.
     pub cache_hit_rate: f64,
     /// Seconds from a segment's first listing (prefetch answer, demand or oracle list) to its
