@@ -89,8 +89,21 @@ impl From<portico_data::DataError> for Error {
     }
 }
 
+/// Seconds a client is asked to wait after a 503 (the server is at capacity: sessions, compute
+/// slots or an answer's deadline) before it tries again.
+pub const RETRY_AFTER_S: u64 = 1;
+
 impl IntoResponse for Error {
+    /// The JSON body; a 503 also says when to retry (`Retry-After`), so clients past capacity
+    /// back off instead of hammering the server while its sessions keep their frame rate.
     fn into_response(self) -> Response {
-        (self.status, Json(self.to_api())).into_response()
+        let mut r = (self.status, Json(self.to_api())).into_response();
+        if self.status == StatusCode::SERVICE_UNAVAILABLE {
+            r.headers_mut().insert(
+                axum::http::header::RETRY_AFTER,
+                axum::http::HeaderValue::from(RETRY_AFTER_S),
+            );
+        }
+        r
     }
 }

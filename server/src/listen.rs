@@ -286,7 +286,8 @@ where
 async fn refuse(mut stream: tokio::net::TcpStream) {
     const BODY: &str = r#"{"status":503,"code":"connections","message":"too many open connections; retry shortly"}"#;
     let answer = format!(
-        "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\nretry-after: 1\r\nconnection: close\r\ncontent-length: {}\r\n\r\n{BODY}",
+        "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\nretry-after: {}\r\nconnection: close\r\ncontent-length: {}\r\n\r\n{BODY}",
+        crate::error::RETRY_AFTER_S,
         BODY.len()
     );
     let _ = tokio::time::timeout(Duration::from_secs(1), stream.write_all(answer.as_bytes())).await;

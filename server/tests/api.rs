@@ -391,9 +391,14 @@ async fn the_stream_pushes_needed_segments_and_survives_vanishing_clients() {
     .await;
     let ws_url = s.base.replace("http://", "ws://") + "/v1/stream";
     let (mut ws, _) = tokio_tungstenite::connect_async(&ws_url).await.unwrap();
-    // A second session is refused while the first is open.
-    let second = tokio_tungstenite::connect_async(&ws_url).await;
-    assert!(second.is_err(), "max_sessions = 1");
+    // A second session is refused while the first is open, with a 503 that says when to retry.
+    match tokio_tungstenite::connect_async(&ws_url).await {
+        Err(tokio_tungstenite::tungstenite::Error::Http(r)) => {
+            assert_eq!(r.status(), 503);
+            assert_eq!(r.headers()["retry-after"], "1");
+        }
+        other => panic!("max_sessions = 1, yet a second session: {other:?}"),
+    }
     let db = s.state.db();
     let req = request(db);
     let expected = s
