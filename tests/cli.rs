@@ -157,6 +157,30 @@ fn bad_input_is_one_clear_line_and_leaves_nothing_behind() {
         );
         assert!(!out.exists(), "{} left an output file", model.display());
     }
+    // A build that fails at the very end, after the whole database was written: the output
+    // path is a directory, so the rename into place fails. The directory and what is in it
+    // stay, and the temporary file written beside it is gone.
+    let taken = dir.path().join("taken.portico");
+    std::fs::create_dir(&taken).unwrap();
+    std::fs::write(taken.join("keep"), "mine").unwrap();
+    let out = portico(&[
+        "build",
+        s(&glb),
+        "-o",
+        s(&taken),
+        "--no-cells",
+        "--no-hierarchy",
+    ]);
+    assert!(!out.status.success());
+    // (The build's progress lines come first: the failure is at the end.)
+    let err = String::from_utf8_lossy(&out.stderr);
+    let last = err.trim().lines().last().unwrap_or_default();
+    assert!(
+        last.starts_with("error: ") && last.contains("taken.portico"),
+        "{err}"
+    );
+    assert_eq!(err.lines().filter(|l| l.starts_with("error")).count(), 1);
+    assert_eq!(std::fs::read_to_string(taken.join("keep")).unwrap(), "mine");
     let leftovers: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()
         .flatten()
@@ -185,9 +209,34 @@ fn database_id(addr: &str) -> Option<String> {
     v["database_id"].as_str().map(str::to_string)
 }
 
+/// A server's stderr, line by line, read on a thread so that a silent server fails the test
+/// (see [`next_line`]) instead of hanging it.
+fn stderr_lines(child: &mut std::process::Child) -> std::sync::mpsc::Receiver<String> {
+    use std::io::BufRead;
+    let stderr = child.stderr.take().expect("piped stderr");
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stderr)
+            .lines()
+            .map_while(Result::ok)
+        {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    rx
+}
+
+/// The server's next log line, within 30 s.
+fn next_line(lines: &std::sync::mpsc::Receiver<String>) -> String {
+    lines
+        .recv_timeout(std::time::Duration::from_secs(30))
+        .expect("the server said nothing for 30 s (or exited)")
+}
+
 #[test]
 fn serve_picks_up_a_rebuilt_file_on_sighup_and_stops_on_sigterm() {
-    use std::io::BufRead;
     let dir = tempfile::tempdir().unwrap();
     let glb = generated(dir.path());
     let db = dir.path().join("served.portico");
@@ -198,8 +247,8 @@ fn serve_picks_up_a_rebuilt_file_on_sighup_and_stops_on_sigterm() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let mut lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
-    let first = lines.next().unwrap().unwrap();
+    let lines = stderr_lines(&mut child);
+    let first = next_line(&lines);
     let addr = first.rsplit("http://").next().unwrap().trim().to_string();
     let before = database_id(&addr).expect("manifest");
     // A damaged file renamed over the served one: the reload fails, says so in one line, and
@@ -214,7 +263,7 @@ fn serve_picks_up_a_rebuilt_file_on_sighup_and_stops_on_sigterm() {
         .status()
         .unwrap();
     assert!(hup.success());
-    let failed = lines.next().unwrap().unwrap();
+    let failed = next_line(&lines);
     assert!(
         failed.starts_with("reload failed, still serving the previous file: ")
             && failed.contains("served.portico"),
@@ -248,7 +297,7 @@ fn serve_picks_up_a_rebuilt_file_on_sighup_and_stops_on_sigterm() {
         .unwrap();
     assert!(hup.success());
     // The server says when it serves the new file.
-    let reloaded = lines.next().unwrap().unwrap();
+    let reloaded = next_line(&lines);
     assert!(reloaded.starts_with("serving "), "{reloaded}");
     let after = database_id(&addr).expect("manifest after reload");
     assert_ne!(before, after, "the rebuilt file is served");
@@ -271,7 +320,8 @@ fn serve_picks_up_a_rebuilt_file_on_sighup_and_stops_on_sigterm() {
         panic!("the server did not stop on SIGTERM");
     };
     assert!(status.success(), "{status}");
-    let rest: Vec<String> = lines.map_while(Result::ok).collect();
+    // The process has exited: the reader thread sees the end of stderr and hangs up.
+    let rest: Vec<String> = lines.iter().collect();
     assert_eq!(rest.last().map(String::as_str), Some("stopped"), "{rest:?}");
 }
 
@@ -281,7 +331,7 @@ fn serve_picks_up_a_rebuilt_file_on_sighup_and_stops_on_sigterm() {
 /// (`--drain-secs`), and the log says exactly that. SIGTERM then stops within the drain too.
 #[test]
 fn sighup_with_a_slow_reader_stalls_nobody_and_says_what_it_did() {
-    use std::io::{BufRead, Read, Write};
+    use std::io::{Read, Write};
     let dir = tempfile::tempdir().unwrap();
     let glb = generated(dir.path());
     let db = dir.path().join("served.portico");
@@ -299,8 +349,8 @@ fn sighup_with_a_slow_reader_stalls_nobody_and_says_what_it_did() {
         .stderr(std::process::Stdio::piped())
         .spawn()
         .unwrap();
-    let mut lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
-    let first = lines.next().unwrap().unwrap();
+    let lines = stderr_lines(&mut child);
+    let first = next_line(&lines);
     let addr = first.rsplit("http://").next().unwrap().trim().to_string();
     let before = database_id(&addr).expect("manifest");
     // A slow reader: a batch of the biggest segment a thousand times over, never read.
@@ -338,7 +388,7 @@ fn sighup_with_a_slow_reader_stalls_nobody_and_says_what_it_did() {
             .unwrap()
             .success()
     );
-    let reloaded = lines.next().unwrap().unwrap();
+    let reloaded = next_line(&lines);
     assert!(reloaded.starts_with("serving "), "{reloaded}");
     let t0 = std::time::Instant::now();
     let after = database_id(&addr).expect("manifest after the reload");
@@ -349,7 +399,7 @@ fn sighup_with_a_slow_reader_stalls_nobody_and_says_what_it_did() {
         "a new connection waited {waited:?}"
     );
     // After the drain the log tells the truth: the slow reader was closed, and it was.
-    let drained = lines.next().unwrap().unwrap();
+    let drained = next_line(&lines);
     assert!(
         drained.contains("1 still busy after 2 s were closed"),
         "{drained}"

@@ -97,17 +97,34 @@ fn every_command_that_writes_spells_its_output_flag_the_same() {
 #[test]
 fn defaults_agree_across_commands() {
     for command in ["walk", "bench", "demo"] {
-        assert!(
-            help(command).contains("[default: 640x480]"),
+        assert_eq!(
+            default_of(&help(command), "--size").as_deref(),
+            Some("640x480"),
             "`portico {command}` has another default image size"
         );
     }
     for command in ["path", "walk", "bench", "loadtest", "demo"] {
-        assert!(
-            help(command).contains("[default: 4]"),
+        assert_eq!(
+            default_of(&help(command), "--legs").as_deref(),
+            Some("4"),
             "`portico {command}` has another default leg count"
         );
     }
+}
+
+/// The `[default: …]` of one option in a command's `--help`: the first one between the option's
+/// line and the next option's.
+fn default_of(help: &str, flag: &str) -> Option<String> {
+    let mut lines = help
+        .lines()
+        .skip_while(|l| !l.trim_start().split([',', ' ']).any(|w| w == flag));
+    lines.next()?;
+    lines
+        .take_while(|l| !l.trim_start().starts_with('-'))
+        .find_map(|l| {
+            let d = l.trim().strip_prefix("[default: ")?;
+            Some(d.trim_end_matches(']').to_string())
+        })
 }
 
 #[test]

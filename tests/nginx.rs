@@ -244,16 +244,21 @@ fn three_replicas_behind_nginx_survive_losing_one() {
             .await
             .unwrap();
         }
-        loop {
-            let msg = ws.next().await.expect("stream open").unwrap();
-            if let tokio_tungstenite::tungstenite::Message::Binary(b) = msg
-                && let Ok(ServerFrame::Segment(id, bytes)) =
-                    portico_protocol::parse_server_frame(&b)
-            {
-                assert_eq!(bytes, &d.segment(id).unwrap()[..]);
-                break;
+        let first_segment = async {
+            loop {
+                let msg = ws.next().await.expect("stream open").unwrap();
+                if let tokio_tungstenite::tungstenite::Message::Binary(b) = msg
+                    && let Ok(ServerFrame::Segment(id, bytes)) =
+                        portico_protocol::parse_server_frame(&b)
+                {
+                    assert_eq!(bytes, &d.segment(id).unwrap()[..]);
+                    break;
+                }
             }
-        }
+        };
+        tokio::time::timeout(std::time::Duration::from_secs(20), first_segment)
+            .await
+            .expect("no segment pushed through nginx within 20 s");
     });
 
     // A walk through nginx carries on when a replica is killed a third of the way in.

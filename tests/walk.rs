@@ -231,7 +231,7 @@ fn slow_proxy(upstream: &str, delay: std::time::Duration) -> String {
 }
 
 #[test]
-fn a_slow_server_makes_the_client_skip_lods_never_wait() {
+fn a_slow_server_makes_the_client_skip_what_is_missing_never_wait() {
     let dir = tempfile::tempdir().unwrap();
     let (server, _) = serve_tiny(dir.path());
     let delay = std::time::Duration::from_millis(400);

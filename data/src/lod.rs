@@ -273,6 +273,25 @@ mod tests {
         assert_eq!(b.triangle_count(), 12);
         assert_eq!(b.vertices[0].color, s.vertices[0].color);
         assert_eq!(b.bounds(), s.bounds());
+        // The average is over area: a red triangle three times the size of a blue one.
+        let tri = |scale: f32, color: [f32; 4]| {
+            [[0.0, 0.0, 0.0], [scale, 0.0, 0.0], [0.0, scale, 0.0]]
+                .map(|p| Vertex::new(p, [0.0, 0.0, 1.0], color))
+        };
+        let two = Mesh {
+            vertices: [
+                tri(3f32.sqrt(), [1.0, 0.0, 0.0, 1.0]),
+                tri(1.0, [0.0, 0.0, 1.0, 1.0]),
+            ]
+            .concat(),
+            indices: (0..6).collect(),
+        };
+        let c = average_color_box(&two).vertices[0].color_f32();
+        let near = |a: f32, b: f32| (a - b).abs() < 1.0 / 255.0;
+        assert!(
+            near(c[0], 0.75) && near(c[1], 0.0) && near(c[2], 0.25),
+            "{c:?}"
+        );
     }
 
     #[test]

@@ -6,7 +6,10 @@ use glam::Vec3;
 use portico_data::Database;
 use portico_data::build::{BuildOptions, Quiet, build};
 use portico_data::cells::occluders::Occluders;
-use portico_data::cells::realtime::{Frustum, eye_to_cell, eye_to_object, eye_to_object_unlisted};
+use portico_data::cells::realtime::{
+    Frustum, compare_culling, eye_to_cell, eye_to_object, eye_to_object_unlisted, frustum_to_cell,
+    frustum_to_object,
+};
 use portico_data::cells::sight::Triangles;
 use portico_data::cells::verify::{cast, verify, verify_against_triangles};
 use portico_data::cells::{CellGraph, StabList, precompute};
@@ -54,14 +57,13 @@ fn quiet_precompute(bounds: &Aabb, boxes: &[Aabb], objects: &[Aabb]) -> (CellGra
     (p.graph, p.stabs)
 }
 
-#[test]
-fn rooms_behind_a_zigzag_of_doors_are_culled() {
-    // Rooms R0 | R1 | R2 | R3 along x; doors near z = 1, then z = 9, then z = 1 again.
+/// Rooms R0 | R1 | R2 | R3 along x; doors near z = 1, then z = 9, then z = 1 again; the wall
+/// boxes, the objects, the cell graph and the stab lists.
+fn zigzag() -> (Vec<Aabb>, Vec<Aabb>, CellGraph, Vec<StabList>) {
     let mut boxes = wall_with_door(4.0, (0.5, 1.5));
     boxes.extend(wall_with_door(8.2, (8.5, 9.5)));
     boxes.extend(wall_with_door(12.4, (0.5, 1.5)));
-    let occluders = faces_of(&boxes);
-    let objects = [
+    let objects = vec![
         bx([1.0, 0.0, 4.0], [2.0, 1.0, 5.0]),   // 0: in R0
         bx([6.0, 0.0, 4.0], [7.0, 1.0, 5.0]),   // 1: in R1
         bx([8.5, 0.0, 9.5], [9.0, 1.0, 9.9]),   // 2: in R2, just past door 2
@@ -70,6 +72,13 @@ fn rooms_behind_a_zigzag_of_doors_are_culled() {
     ];
     let bounds = bx([0.0, 0.0, 0.0], [16.6, 3.0, 10.0]);
     let (g, stabs) = quiet_precompute(&bounds, &boxes, &objects);
+    (boxes, objects, g, stabs)
+}
+
+#[test]
+fn rooms_behind_a_zigzag_of_doors_are_culled() {
+    let (boxes, objects, g, stabs) = zigzag();
+    let occluders = faces_of(&boxes);
     let r0 = g.locate(Vec3::new(2.0, 1.0, 5.0)).unwrap();
     let r2 = g.locate(Vec3::new(10.0, 1.0, 5.0)).unwrap();
     let r3 = g.locate(Vec3::new(14.0, 1.0, 5.0)).unwrap();
@@ -103,6 +112,122 @@ fn rooms_behind_a_zigzag_of_doors_are_culled() {
     assert!(!stabs.iter().any(|s| s.fallback));
 }
 
+/// The run-time culls of one view in R0, looking down the rooms past the first door (Funkhouser
+/// Table 4.1): frustum-to-cell keeps the live cells the frustum touches and nothing behind the
+/// eye; eye-to-object without a stab list keeps what touches a reached cell inside its wedge,
+/// not everything in the frustum.
+#[test]
+fn frustum_and_unlisted_culls_keep_what_they_should() {
+    let (_, objects, g, stabs) = zigzag();
+    let (r0, r1, r2) = (
+        g.locate(Vec3::new(2.0, 1.0, 5.0)).unwrap(),
+        g.locate(Vec3::new(6.0, 1.0, 5.0)).unwrap(),
+        g.locate(Vec3::new(10.0, 1.0, 5.0)).unwrap(),
+    );
+    let ahead = Frustum::new(Vec3::new(2.0, 1.5, 1.0), Vec3::X, Vec3::Y, 0.5, 0.4);
+    let ftc = frustum_to_cell(&g, &ahead);
+    let expected: Vec<u32> = (0..g.cells.len() as u32)
+        .filter(|&c| g.cells[c as usize].live && ahead.touches(&g.cells[c as usize].bounds))
+        .collect();
+    assert_eq!(ftc, expected);
+    assert!(
+        ftc.contains(&r0) && ftc.contains(&r1) && ftc.contains(&r2),
+        "{ftc:?}"
+    );
+    assert!(
+        (0..g.cells.len() as u32)
+            .any(|c| !g.cells[c as usize].live && ahead.touches(&g.cells[c as usize].bounds)),
+        "no dead cell in view: the liveness filter is untested"
+    );
+    let fto = frustum_to_object(&objects, &ahead);
+    let expected: Vec<u32> = (0..objects.len() as u32)
+        .filter(|&o| ahead.touches(&objects[o as usize]))
+        .collect();
+    assert_eq!(fto, expected);
+    assert!(fto.contains(&3) && !fto.contains(&0), "{fto:?}");
+    let behind = Frustum::new(Vec3::new(3.0, 1.5, 5.0), -Vec3::X, Vec3::Y, 0.5, 0.4);
+    let ftc = frustum_to_cell(&g, &behind);
+    // (R1, right behind the eye, passes the plane-by-plane box test — each side plane has a
+    // corner of the big room inside it — which is conservative; R2 does not.)
+    assert!(ftc.contains(&r0) && !ftc.contains(&r2), "{ftc:?}");
+
+    // R2 is not reached through the first door from here (door 2 is far off to the side), so
+    // its middle object — inside the frustum — is not listed without a stab list either.
+    let reached = eye_to_cell(&g, &ahead);
+    assert!(reached.iter().all(|r| r.cell != r2), "{reached:?}");
+    assert!(ahead.touches(&objects[3]), "object 3 is in the frustum");
+    let unlisted = eye_to_object_unlisted(&g, &reached, &objects);
+    assert!(!unlisted.contains(&3), "{unlisted:?}");
+    let listed = eye_to_object(&reached, &stabs[r0 as usize], &objects);
+    assert!(
+        listed.iter().all(|o| unlisted.contains(o)),
+        "{listed:?} ⊄ {unlisted:?}"
+    );
+}
+
+/// Funkhouser Table 4.1 over two views: each method's cells, objects and polygons, as the mean
+/// and the maximum over the views.
+#[test]
+fn the_culling_table_averages_each_method_over_the_views() {
+    let (_, objects, g, stabs) = zigzag();
+    let views = [
+        Frustum::new(Vec3::new(2.0, 1.5, 1.0), Vec3::X, Vec3::Y, 0.5, 0.4),
+        Frustum::new(Vec3::new(3.0, 1.5, 5.0), -Vec3::X, Vec3::Y, 0.5, 0.4),
+    ];
+    let polygons = [10, 20, 30, 40, 50];
+    let rows = compare_culling(&g, &stabs, &objects, &polygons, &views);
+    let names: Vec<&str> = rows.iter().map(|r| r.method.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "none",
+            "frustum (FTC, FTO)",
+            "cell-to-object (CTO)",
+            "CTO within frustum",
+            "eye-to-object (ETC, ETO)"
+        ]
+    );
+    let live = g.cells.iter().filter(|c| c.live).count() as u64;
+    assert_eq!(rows[0].cells, (live as f64, live));
+    assert_eq!(rows[0].objects, (5.0, 5));
+    assert_eq!(rows[0].polygons, (150.0, 150));
+    let ftc: Vec<u64> = views
+        .iter()
+        .map(|v| frustum_to_cell(&g, v).len() as u64)
+        .collect();
+    let fto: Vec<Vec<u32>> = views
+        .iter()
+        .map(|v| frustum_to_object(&objects, v))
+        .collect();
+    let poly = |o: &[u32]| o.iter().map(|&i| polygons[i as usize]).sum::<u64>();
+    assert_ne!(
+        ftc[0], ftc[1],
+        "two different views make a mean worth checking"
+    );
+    assert_eq!(
+        rows[1].cells,
+        ((ftc[0] + ftc[1]) as f64 / 2.0, ftc[0].max(ftc[1]))
+    );
+    assert_eq!(
+        rows[1].objects,
+        (
+            (fto[0].len() + fto[1].len()) as f64 / 2.0,
+            fto[0].len().max(fto[1].len()) as u64
+        )
+    );
+    assert_eq!(
+        rows[1].polygons,
+        (
+            (poly(&fto[0]) + poly(&fto[1])) as f64 / 2.0,
+            poly(&fto[0]).max(poly(&fto[1]))
+        )
+    );
+    // Each later method keeps no more objects than CTO, and eye-to-object no more than CTO
+    // within the frustum.
+    assert!(rows[4].objects.0 <= rows[3].objects.0 && rows[3].objects.0 <= rows[2].objects.0);
+    assert!(rows[2].objects.0 <= rows[0].objects.0);
+}
+
 #[test]
 fn two_rooms_and_a_door_see_each_other() {
     let boxes = wall_with_door(4.0, (4.0, 5.0));
@@ -117,6 +242,9 @@ fn two_rooms_and_a_door_see_each_other() {
     assert_ne!(a, b);
     assert_eq!(stabs[a as usize].objects(), vec![0, 1]);
     assert_eq!(stabs[b as usize].objects(), vec![0, 1]);
+    // A stab list starts with its own cell.
+    assert_eq!(stabs[a as usize].entries[0].cell, a);
+    assert_eq!(stabs[b as usize].entries[0].cell, b);
     // The space inside the wall beside the door is dead.
     let inside = g.locate(Vec3::new(4.1, 1.0, 8.0)).unwrap();
     assert!(!g.cells[inside as usize].live);
@@ -165,9 +293,10 @@ fn a_model_without_occluders_falls_back_to_an_open_grid() {
     let (g, stabs) = quiet_precompute(&bounds, &[], &objects);
     assert!(g.grid_fallback);
     assert!(g.cells.len() >= 8);
-    // All open: every cell sees every object.
+    // All open: every cell sees every object, exactly (not a fallback's guess).
     for (c, s) in stabs.iter().enumerate() {
         assert_eq!(s.objects().len(), objects.len(), "cell {c}");
+        assert!(!s.fallback, "cell {c}");
     }
     assert_eq!(
         verify(&g, &stabs, &[], &objects, 2_000, 1).false_negatives,

@@ -297,7 +297,7 @@ fn broken_corpus_files_name_the_problem() {
             "out of range",
         ),
         ("glTF2/MissingBin/BoxTextured.gltf", "buffer"),
-        ("invalid/empty.obj", ""),
+        ("invalid/empty.obj", "contains no triangle meshes"),
     ] {
         let e = import_file(&dir.join(rel)).expect_err(rel).to_string();
         assert!(e.contains(rel) && e.contains(needle), "{rel}: {e}");

@@ -72,33 +72,51 @@ fn observers(p: &Prefetcher) -> Vec<Observer> {
     out
 }
 
+/// The coarsest-LOD segment of every object the observer sees now (eye-to-object visibility,
+/// Funkhouser §4.2), with the object's id; the prefetcher must have cells.
+fn coarsest_visible_now(p: &Prefetcher, obs: &Observer) -> Vec<(u32, u32)> {
+    let header = p.database().header();
+    let objects: Vec<_> = header.instances.iter().map(|i| i.bounds).collect();
+    let g = p.graph().unwrap();
+    let view = Frustum::new(
+        obs.eye.into(),
+        obs.dir.into(),
+        Vec3::Y,
+        obs.half_fov_x,
+        obs.half_fov_y,
+    );
+    let stab = p.stab(g.locate(obs.eye.into()).unwrap()).unwrap();
+    eye_to_object(&eye_to_cell(g, &view), &stab, &objects)
+        .into_iter()
+        .map(|o| {
+            let lods = header.lods_of(&header.instances[o as usize]);
+            (o, lods.last().unwrap().segment)
+        })
+        .collect()
+}
+
 #[test]
 fn the_read_set_holds_the_coarsest_lod_of_everything_visible_now_even_with_no_budget() {
     let p = prefetcher(false);
-    let db = p.database();
-    let header = db.header();
-    let objects: Vec<_> = header.instances.iter().map(|i| i.bounds).collect();
     let policy = Policy {
         read_bytes: 0,
         ..Policy::default()
     };
+    let mut seen = 0;
     for obs in observers(p) {
         let r = p.answer(&obs, &policy, &HashSet::new()).unwrap();
         let got: HashSet<u32> = r.items.iter().map(|i| i.segment).collect();
-        let g = p.graph().unwrap();
-        let view = Frustum::new(obs.eye.into(), obs.dir.into(), Vec3::Y, 0.6, 0.45);
-        let cell = g.locate(obs.eye.into()).unwrap();
-        let stab = p.stab(cell).unwrap();
-        for o in eye_to_object(&eye_to_cell(g, &view), &stab, &objects) {
-            let lods = header.lods_of(&header.instances[o as usize]);
-            let coarsest = lods.last().unwrap().segment;
+        for (o, coarsest) in coarsest_visible_now(p, &obs) {
             assert!(got.contains(&coarsest), "visible object {o} missing");
+            seen += 1;
         }
+        let cell = p.graph().unwrap().locate(obs.eye.into()).unwrap();
         assert!(
             got.contains(&p.stab_segment(cell).unwrap()),
             "eye cell's stab list"
         );
     }
+    assert!(seen > 0, "no observer saw anything");
 }
 
 #[test]
@@ -123,14 +141,23 @@ fn the_read_set_is_ordered_budgeted_and_skips_what_is_held() {
             .iter()
             .all(|i| i.kind == NeedKind::Geometry)
     );
-    // Within the budget, except for the mandatory coarsest LODs of what is visible now.
+    // Within the budget, except for what is mandatory: the stab lists and coarsest LODs needed
+    // now (frame 0). Finer LODs of what is in view now are not mandatory.
+    let level = levels(p);
+    let mandatory = |i: &&portico_protocol::NeedItem| {
+        i.frames == 0 && (i.kind == NeedKind::Stab || level.get(&i.segment) == Some(&0))
+    };
     let optional: u64 = r
         .items
         .iter()
-        .filter(|i| i.frames > 0)
+        .filter(|i| !mandatory(i))
         .map(|i| i.bytes)
         .sum();
     assert!(optional <= policy.read_bytes, "{optional}");
+    assert!(
+        r.items.iter().any(|i| !mandatory(&i) && i.frames == 0),
+        "no optional item needed now: the check above is weaker than it looks"
+    );
     // No segment twice.
     let unique: HashSet<u32> = r.items.iter().map(|i| i.segment).collect();
     assert_eq!(unique.len(), r.items.len());
@@ -166,32 +193,45 @@ fn held_segments_outside_the_lookahead_set_are_eviction_hints() {
 #[test]
 fn deeper_lookahead_never_shrinks_and_direction_cull_is_a_subset_of_any() {
     let p = prefetcher(false);
+    let segments = |r: &portico_protocol::PrefetchResponse| -> HashSet<u32> {
+        r.items.iter().map(|i| i.segment).collect()
+    };
+    let mut grew = 0;
     for obs in observers(p).into_iter().take(6) {
-        let mut last = 0;
+        let mut last = (0, HashSet::new());
         for depth in [1, 4, 16, 64] {
             let policy = Policy {
                 depth_frames: depth,
                 range_cull: RangeCull::Any,
                 lookahead_cull: LookaheadCull::Any,
                 cache_bytes: u64::MAX,
+                read_bytes: u64::MAX,
                 ..Policy::default()
             };
             let r = p.answer(&obs, &policy, &HashSet::new()).unwrap();
             assert!(
-                r.range_cells >= last,
-                "depth {depth}: {} < {last}",
-                r.range_cells
+                r.range_cells >= last.0,
+                "depth {depth}: {} < {}",
+                r.range_cells,
+                last.0
             );
-            last = r.range_cells;
+            let set = segments(&r);
+            assert!(set.is_superset(&last.1), "depth {depth} lost segments");
+            grew += usize::from(set.len() > last.1.len() && depth > 1);
+            last = (r.range_cells, set);
             let dir = Policy {
                 range_cull: RangeCull::Direction,
                 ..policy
             };
             let rd = p.answer(&obs, &dir, &HashSet::new()).unwrap();
             assert!(rd.range_cells <= r.range_cells);
-            assert!(rd.lookahead_bytes <= r.lookahead_bytes);
+            assert!(
+                segments(&rd).is_subset(&last.1),
+                "depth {depth}: the direction cull read what `any` did not"
+            );
         }
     }
+    assert!(grew > 0, "a deeper lookahead never added anything");
 }
 
 #[test]
@@ -785,6 +825,15 @@ fn the_lookahead_stops_at_the_cache_size_but_keeps_the_view() {
                     r.items.iter().any(|i| i.kind == NeedKind::Geometry),
                     "nothing at all for a {cache}-byte cache"
                 );
+                if !no_cells {
+                    let got: HashSet<u32> = r.items.iter().map(|i| i.segment).collect();
+                    for (o, coarsest) in coarsest_visible_now(p, &obs) {
+                        assert!(
+                            got.contains(&coarsest),
+                            "a {cache}-byte cache lost visible object {o}"
+                        );
+                    }
+                }
                 sizes.push(r.lookahead_bytes);
             }
             assert!(

@@ -15,14 +15,16 @@ fn prefetcher() -> &'static Prefetcher {
     })
 }
 
-/// One input.
-pub fn run(data: &[u8]) {
+/// One input; returns how many requests it decoded to were answered (0, 1 or 2), so a replay
+/// can tell that the answers' checks ran at all.
+pub fn run(data: &[u8]) -> usize {
     let p = prefetcher();
     let segments = p.database().segments().len();
     let decoded = [
         portico_protocol::from_bincode::<PrefetchRequest>(data).ok(),
         portico_protocol::from_json::<PrefetchRequest>(data).ok(),
     ];
+    let mut answered = 0;
     for req in decoded.into_iter().flatten() {
         let Ok(held) = portico_server::routes::validate(&req, segments) else {
             continue;
@@ -31,6 +33,8 @@ pub fn run(data: &[u8]) {
         if let Ok(a) = p.answer_within(&req.observer, &req.policy, &held, &budget) {
             assert!(a.evict.len() <= MAX_RELEASE_HINTS);
             assert!(a.items.iter().all(|i| (i.segment as usize) < segments));
+            answered += 1;
         }
     }
+    answered
 }

@@ -7,4 +7,6 @@ mod body;
 #[path = "../bodies/tiny.rs"]
 mod tiny;
 
-libfuzzer_sys::fuzz_target!(|data: &[u8]| body::run(data));
+libfuzzer_sys::fuzz_target!(|data: &[u8]| {
+    body::run(data);
+});

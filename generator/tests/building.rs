@@ -442,18 +442,46 @@ fn overlaps(a: ([f32; 3], [f32; 3]), b: ([f32; 3], [f32; 3])) -> bool {
     (0..3).all(|k| a.0[k] < b.1[k] && b.0[k] < a.1[k])
 }
 
+/// The occluder triangle (as its bounding box) that fills an opening, if any: the opening's
+/// box shrunk 1 cm along its width and height, so the jambs and lintel do not count, and grown
+/// 1 cm across its thinnest axis (the wall's or slab's thickness), so the flat faces of an
+/// uncut wall or slab would.
+fn filling(
+    tris: &[([f32; 3], [f32; 3])],
+    d: &portico_generator::Door,
+) -> Option<([f32; 3], [f32; 3])> {
+    let size: Vec<f32> = (0..3).map(|k| d.max[k] - d.min[k]).collect();
+    let thin = (0..3).min_by(|&a, &b| size[a].total_cmp(&size[b])).unwrap();
+    let mut inner = (d.min.map(|v| v + 0.01), d.max.map(|v| v - 0.01));
+    inner.0[thin] = d.min[thin] - 0.01;
+    inner.1[thin] = d.max[thin] + 0.01;
+    tris.iter().copied().find(|t| overlaps(*t, inner))
+}
+
 /// No occluder geometry inside any door or stair opening, but occluders right around each.
 fn check_openings_are_gaps(b: &Building) {
     let tris = occluder_triangles(b);
     assert!(!tris.is_empty());
     for d in &b.doors {
-        let inner = (d.min.map(|v| v + 0.01), d.max.map(|v| v - 0.01));
-        let blocking = tris.iter().find(|t| overlaps(**t, inner));
+        let blocking = filling(&tris, d);
         assert!(blocking.is_none(), "{d:?} is filled by {blocking:?}");
         let outer = (d.min.map(|v| v - 0.02), d.max.map(|v| v + 0.02));
         assert!(
             tris.iter().any(|t| overlaps(*t, outer)),
             "{d:?} is not in a wall or slab"
         );
+        // The check sees a face across the opening: an uncut wall's triangle on either side.
+        let thin = (0..3)
+            .min_by(|&a, &b| (d.max[a] - d.min[a]).total_cmp(&(d.max[b] - d.min[b])))
+            .unwrap();
+        for side in [d.min[thin], d.max[thin]] {
+            let (mut lo, mut hi) = (d.min, d.max);
+            lo[thin] = side;
+            hi[thin] = side;
+            assert!(
+                filling(&[(lo, hi)], d).is_some(),
+                "{d:?}: a face is not seen"
+            );
+        }
     }
 }

@@ -40,17 +40,26 @@ fn every_object_is_under_one_cluster_and_big_clusters_have_textured_boxes() {
     let h = db.header().hierarchy.as_ref().expect("hierarchy");
     let bounds: Vec<_> = db.header().instances.iter().map(|i| i.bounds).collect();
     h.check(&bounds).unwrap();
-    let textured = h.nodes.iter().filter(|n| n.texture != u32::MAX).count();
-    assert!(textured > 0 && textured <= h.nodes.len());
-    // Every face colour is a colour, and big clusters cover something on every side view.
-    for n in &h.nodes {
-        assert!(
-            n.face_colors
-                .iter()
-                .flatten()
-                .all(|c| (0.0..=1.0).contains(c))
+    // Exactly the clusters big enough get a textured box, with the tile their size asks for;
+    // the tiny building has both kinds.
+    for (i, n) in h.nodes.iter().enumerate() {
+        let tile = portico_data::hierarchy::tile_for(&n.bounds);
+        assert_eq!(
+            n.texture != u32::MAX,
+            tile > 0,
+            "cluster {i}: {:?}",
+            n.bounds
         );
+        if tile > 0 {
+            assert_eq!(n.tile, tile, "cluster {i}");
+        }
     }
+    let textured = h.nodes.iter().filter(|n| n.texture != u32::MAX).count();
+    assert!(
+        textured > 0 && textured < h.nodes.len(),
+        "{textured} of {} textured",
+        h.nodes.len()
+    );
     let root = &h.nodes[h.root().unwrap() as usize];
     assert!(
         root.face_colors[0][3] > 0.1,

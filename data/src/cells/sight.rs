@@ -59,16 +59,6 @@ impl Triangles {
         Ok(Triangles { bounds, triangles })
     }
 
-    /// Number of objects.
-    pub fn len(&self) -> usize {
-        self.bounds.len()
-    }
-
-    /// Whether there are no objects.
-    pub fn is_empty(&self) -> bool {
-        self.bounds.is_empty()
-    }
-
     /// The object whose triangle `origin + t·dir` hits first for `0 < t ≤ max_t`, if any.
     pub fn first_hit(&self, origin: Vec3, dir: Vec3, max_t: f32) -> Option<u32> {
         let mut near: Vec<(f32, u32)> = self
