@@ -11,7 +11,6 @@ set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 bin=${PORTICO:-$root/target/release/portico}
 [ -x "$bin" ] || { echo "error: no $bin: run cargo build --release first" >&2; exit 1; }
-portico() { "$bin" "$@"; }
 
 dir=readme-figures sweep= mega=
 for a in "$@"; do
@@ -25,12 +24,19 @@ done
 mkdir -p "$dir" && cd "$dir"
 
 server=
-stop() { [ -n "$server" ] && kill "$server" 2>/dev/null && wait "$server" 2>/dev/null; server=; true; }
+stop() {
+  if [ -n "$server" ]; then
+    kill "$server" 2>/dev/null || true
+    wait "$server" 2>/dev/null || true # it drains, then exits on SIGTERM
+  fi
+  server=
+}
 trap stop EXIT
 # `portico serve F` in the background, on the README's port; returns once /healthz answers.
+# (The binary itself, not the shell function: $! must be the server's pid.)
 serve() {
   stop
-  portico serve "$1" >"serve-$(basename "$1").log" 2>&1 &
+  "$bin" serve "$1" >"serve-$(basename "$1").log" 2>&1 &
   server=$!
   for _ in $(seq 100); do
     curl -fs http://127.0.0.1:7878/healthz >/dev/null 2>&1 && return
@@ -65,8 +71,8 @@ step walk --server http://127.0.0.1:7878 --path tour.json --cache-mb 64 --max-fr
 step walk --server http://127.0.0.1:7878 --path tour.json --cache-mb 8 --max-frames 2400 -o w8
 step walk --server http://127.0.0.1:7878 --elision optimize --max-frames 600 -o w-optimize
 step walk --server http://127.0.0.1:7878 --elision impostors --max-frames 600 -o w-impostors
-step loadtest --clients 8 --path tour.json --policy depth=16,gran=object,range=frustum,look=any -o lt
-step loadtest --clients 8 --path tour.json --policy depth=16,gran=object,range=frustum,look=any,imp=1 -o lt-imp
+step loadtest --clients 8 --path tour.json --max-frames 400 --policy depth=16,gran=object,range=frustum,look=any -o lt
+step loadtest --clients 8 --path tour.json --max-frames 400 --policy depth=16,gran=object,range=frustum,look=any,imp=1 -o lt-imp
 if [ -n "$sweep" ]; then
   step loadtest --clients 8 --path tour.json --sweep --link rtt=20ms,rate=100mbit -o lt_sweep
 fi
