@@ -33,7 +33,7 @@ stop() {
 }
 trap stop EXIT
 # `portico serve F` in the background, on the README's port; returns once /healthz answers.
-# (The binary itself, not the shell function: $! must be the server's pid.)
+# (Started directly, not through a function or subshell: $! must be the server's pid.)
 serve() {
   stop
   "$bin" serve "$1" >"serve-$(basename "$1").log" 2>&1 &
