@@ -1,7 +1,7 @@
 //! The README's commands run as written: every `portico …` command in its shell blocks, its
-//! prose and its Performance table is given to the real binary's argument parser (with `--help` at the
-//! end, so nothing runs but every flag and value before it is checked), and must carry every
-//! option the usage line marks as required. A renamed flag, a missing `-o` where one is
+//! prose and its Performance table is given to the real binary's argument parser (with
+//! `--help` at the end, so nothing runs but every flag and value before it is checked), and
+//! must carry every option the usage line marks as required. A renamed flag, a missing `-o` where one is
 //! required, or a value the command does not accept fails here.
 //!
 //! Placeholders are filled the way a reader would: `…` after `--server` is the default URL,
