@@ -7,8 +7,8 @@ use portico_data::Database;
 use portico_data::build::{BuildOptions, Quiet, build};
 use portico_data::cells::occluders::Occluders;
 use portico_data::cells::realtime::{
-    Frustum, compare_culling, eye_to_cell, eye_to_object, eye_to_object_unlisted, frustum_to_cell,
-    frustum_to_object,
+    Frustum, compare_culling, eye_to_cell, eye_to_cell_bounded, eye_to_object,
+    eye_to_object_unlisted, frustum_to_cell, frustum_to_object,
 };
 use portico_data::cells::sight::Triangles;
 use portico_data::cells::verify::{cast, verify, verify_against_triangles};
@@ -323,9 +323,20 @@ fn eye_to_cell_on_an_open_grid_is_bounded_and_conservative() {
     // Conservative: every cell is connected and in view, so every cell is reached, once.
     assert_eq!(expected.len(), g.cells.len());
     assert_eq!(eye_to_cell(&g, &view), expected);
-    // Without the grid flag the portal search runs, hits its bound, and falls back to the same.
+    // Without the grid flag the portal search runs: every cell is in view through the open
+    // portals, so every cell is reached.
     g.grid_fallback = false;
-    assert_eq!(eye_to_cell(&g, &view).len(), expected.len());
+    let mut cells: Vec<u32> = eye_to_cell(&g, &view).iter().map(|r| r.cell).collect();
+    cells.sort_unstable();
+    cells.dedup();
+    assert_eq!(cells.len(), g.cells.len());
+    // The search pops one portal sequence per entry it answers: with exactly that many
+    // allowed it finishes; with one fewer it stops and answers what the frustum reaches, once
+    // per cell.
+    let all = eye_to_cell_bounded(&g, &view, usize::MAX);
+    assert!(all.len() > expected.len(), "{} entries", all.len());
+    assert_eq!(eye_to_cell_bounded(&g, &view, all.len()), all);
+    assert_eq!(eye_to_cell_bounded(&g, &view, all.len() - 1), expected);
 }
 
 /// A built building: cell graph, stab lists, occluder faces, object bounds, object triangles.
