@@ -120,10 +120,7 @@ fn full_detail(
     let meshes: Vec<_> = h
         .instances
         .iter()
-        .map(|i| {
-            let seg = h.lods_of(i)[0].segment;
-            r.upload(&db.segment(seg).unwrap()).unwrap()
-        })
+        .map(|i| r.upload(&db.geometry(&h.lods_of(i)[0]).unwrap()).unwrap())
         .collect();
     let draws: Vec<Draw> = h
         .instances
@@ -175,16 +172,75 @@ fn once_everything_has_arrived_a_frame_matches_the_full_detail_render() {
         drawn * 10 > reference.len() / 4,
         "the reference view shows the building ({drawn} px)"
     );
-    let differ = walked
+    let share = differing(&walked, &reference);
+    assert!(
+        share <= 0.01,
+        "{:.1} % of pixels differ from the full-detail render",
+        share * 100.0
+    );
+}
+
+/// The share of pixels that differ by more than 8 in some channel.
+fn differing(a: &image::RgbaImage, b: &image::RgbaImage) -> f64 {
+    let n = a
         .pixels()
-        .zip(reference.pixels())
+        .zip(b.pixels())
         .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 8))
         .count();
-    assert!(
-        differ * 100 <= reference.len() / 4,
-        "{differ} of {} pixels differ from the full-detail render",
-        reference.len() / 4
+    n as f64 / a.len() as f64 * 4.0
+}
+
+#[test]
+fn a_compressed_database_looks_the_same_and_the_client_decodes_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let plain = common::build_tiny(dir.path());
+    let packed_dir = dir.path().join("packed");
+    std::fs::create_dir(&packed_dir).unwrap();
+    let opts = portico_data::build::BuildOptions {
+        compress: true,
+        ..Default::default()
+    };
+    let packed = common::build_tiny_with(&packed_dir, &opts);
+    let (a, b) = (
+        portico_data::Database::open(&plain).unwrap(),
+        portico_data::Database::open(&packed).unwrap(),
     );
+    let geometry = |db: &portico_data::Database| portico_data::stats::stats(db).geometry_bytes;
+    assert!(
+        geometry(&b) * 2 < geometry(&a),
+        "compressed segments are smaller"
+    );
+    // Every instance at its finest LOD, from each file: no visible change.
+    let path = standing(&a);
+    let size = (160, 120);
+    let (ra, rb) = (
+        full_detail(&a, &path, size, 1.0),
+        full_detail(&b, &path, size, 1.0),
+    );
+    let psnr = portico_lab::bench::fidelity::psnr(&ra, &rb).unwrap_or(f64::INFINITY);
+    eprintln!("compressed vs plain, finest LODs: PSNR {psnr:.1} dB");
+    assert!(
+        psnr >= 50.0,
+        "PSNR {psnr:.1} dB against the uncompressed render"
+    );
+    // The real client streams it, decodes it on its IO thread and draws the same picture.
+    let (server, _) = common::serve_db(&packed);
+    let out = packed_dir.join("walk");
+    let mut cfg = config(server, out.clone(), 64 << 20);
+    cfg.path = path;
+    cfg.elision = Algorithm::None;
+    cfg.policy.size_threshold_px = 0.0;
+    cfg.max_frames = Some(50);
+    cfg.png_every = 49;
+    let s = walk(&cfg, &mut |_, _| {}).unwrap();
+    assert_eq!(s.io_failures, 0);
+    assert!(s.gpu_held_peak_bytes <= s.cache_budget);
+    let walked = image::open(out.join("frames/frame_00049.png"))
+        .unwrap()
+        .to_rgba8();
+    let reference = full_detail(&b, &cfg.path, cfg.size, cfg.fovy);
+    let share = differing(&walked, &reference);
+    assert!(share <= 0.01, "{:.1} % of pixels differ", share * 100.0);
 }
 
 /// A TCP proxy that holds every chunk from the server for `delay` before passing it on: a slow

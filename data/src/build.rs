@@ -36,6 +36,8 @@ pub struct BuildOptions {
     pub no_cells: bool,
     /// Skip the model hierarchy of clusters and its impostors.
     pub no_hierarchy: bool,
+    /// Write geometry segments quantised and meshopt-encoded ([`crate::codec`]).
+    pub compress: bool,
 }
 
 /// Receives progress from long build steps (the CLI draws progress bars with it).
@@ -121,9 +123,9 @@ pub fn build_with(
 
     let t1 = Instant::now();
     let mut w = DbWriter::create(out)?;
-    let objects = write_objects(&mut w, &lods, opts.flatten, obs)?;
+    let objects = write_objects(&mut w, &lods, opts, obs)?;
     let records = if opts.flatten {
-        write_flattened(&mut w, &lods, &instances, obs)?
+        write_flattened(&mut w, &lods, &instances, opts.compress, obs)?
     } else {
         instances
             .iter()
@@ -327,9 +329,10 @@ fn write_cells(
 fn write_objects(
     w: &mut DbWriter,
     lods: &[(String, u32, Vec<LodMesh>)],
-    flatten: bool,
+    opts: &BuildOptions,
     obs: &dyn Observer,
 ) -> Result<Vec<ObjectRecord>> {
+    let flatten = opts.flatten;
     if !flatten {
         obs.stage("geometry", lods.len() as u64);
     }
@@ -341,7 +344,7 @@ fn write_objects(
                 obs.advance(1);
                 levels
                     .iter()
-                    .map(|l| write_lod(w, l, encode_geometry(&l.mesh), l.error))
+                    .map(|l| write_lod(w, l, segment(&l.mesh, opts.compress), l.error))
                     .collect::<Result<_>>()?
             };
             Ok(ObjectRecord {
@@ -359,6 +362,7 @@ fn write_flattened(
     w: &mut DbWriter,
     lods: &[(String, u32, Vec<LodMesh>)],
     instances: &[Instance],
+    compress: bool,
     obs: &dyn Observer,
 ) -> Result<Vec<InstanceRecord>> {
     obs.stage("flatten", instances.len() as u64);
@@ -374,7 +378,7 @@ fn write_flattened(
                     .map(|l| {
                         let mut m = l.mesh.transformed(&inst.transform);
                         bake(&mut m);
-                        (encode_geometry(&m), l, l.error * scale)
+                        (segment(&m, compress), l, l.error * scale)
                     })
                     .collect()
             })
@@ -389,6 +393,15 @@ fn write_flattened(
         }
     }
     Ok(records)
+}
+
+/// A mesh's geometry segment, plain or compressed.
+fn segment(mesh: &crate::geometry::Mesh, compress: bool) -> Vec<u8> {
+    if compress {
+        crate::codec::encode(mesh)
+    } else {
+        encode_geometry(mesh)
+    }
 }
 
 fn write_lod(w: &mut DbWriter, l: &LodMesh, bytes: Vec<u8>, error: f32) -> Result<LodRecord> {

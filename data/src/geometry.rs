@@ -208,6 +208,9 @@ pub const GEOMETRY_MAGIC: u32 = u32::from_le_bytes(*b"PGEO");
 pub const GEOMETRY_VERSION: u16 = 1;
 /// Flag: the index stream holds `u32` indices (else `u16`).
 pub const GEOMETRY_U32_INDICES: u16 = 1;
+/// Flag: the streams are quantised and meshopt-encoded (`codec`, native builds); such a
+/// segment must be decoded into the plain layout before [`GeometryView::parse`] takes it.
+pub const GEOMETRY_MESHOPT: u16 = 2;
 
 /// The fixed 32-byte header at the start of a geometry segment.
 #[repr(C)]
@@ -284,6 +287,9 @@ impl<'a> GeometryView<'a> {
         let header: GeometryHeader = bytemuck::pod_read_unaligned(head);
         if header.magic != GEOMETRY_MAGIC || header.version != GEOMETRY_VERSION {
             return Err("geometry segment has a bad magic or version".into());
+        }
+        if header.flags & GEOMETRY_MESHOPT != 0 {
+            return Err("geometry segment is compressed (meshopt): decode it first".into());
         }
         let vlen = header.vertex_count as usize * std::mem::size_of::<Vertex>();
         let isize = if header.flags & GEOMETRY_U32_INDICES != 0 {

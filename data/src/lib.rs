@@ -16,6 +16,8 @@ pub mod bake;
 pub mod build;
 pub mod bulk;
 pub mod cells;
+#[cfg(feature = "native")]
+pub mod codec;
 pub mod error;
 pub mod format;
 pub mod geometry;

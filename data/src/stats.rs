@@ -50,6 +50,8 @@ pub struct DbStats {
     pub segments: u64,
     /// Bytes of geometry segments.
     pub geometry_bytes: u64,
+    /// Triangles stored in geometry segments, every LOD once (a shared definition counts once).
+    pub triangles_stored: u64,
     /// Total file size.
     pub file_bytes: u64,
     /// Bounds (min, max) in metres, relative to `origin`.
@@ -116,6 +118,13 @@ pub fn stats(db: &Database) -> DbStats {
         .filter(|s| s.kind == SegmentKind::Geometry as u16)
         .map(|s| s.length)
         .sum();
+    let stored: std::collections::BTreeMap<u32, u64> = h
+        .objects
+        .iter()
+        .flat_map(|o| &o.lods)
+        .chain(h.instances.iter().flat_map(|i| i.lods.iter().flatten()))
+        .map(|l| (l.segment, l.triangles as u64))
+        .collect();
     let kind_bytes = |k: SegmentKind| -> u64 {
         db.segments()
             .iter()
@@ -154,6 +163,7 @@ pub fn stats(db: &Database) -> DbStats {
         lod_table,
         segments: db.segments().len() as u64,
         geometry_bytes,
+        triangles_stored: stored.values().sum(),
         file_bytes: db.file_len(),
         bounds: [h.bounds.min, h.bounds.max],
         origin: h.origin,
@@ -185,7 +195,7 @@ impl DbStats {
     /// A human-readable summary with the LOD table laid out like Funkhouser's Table 3.1.
     pub fn to_text(&self) -> String {
         let mut s = format!(
-            "{} (format v{}{})\n  objects {}  instances {}  occluders {}  materials {}\n  triangles: highest LOD {}  all LODs {}\n  segments {}  geometry {:.1} MB  file {:.1} MB\n",
+            "{} (format v{}{})\n  objects {}  instances {}  occluders {}  materials {}\n  triangles: highest LOD {}  all LODs {}\n  segments {}  geometry {:.1} MB ({:.1} B per stored triangle)  file {:.1} MB\n",
             self.name,
             self.format_version,
             if self.flattened { ", flattened" } else { "" },
@@ -197,6 +207,7 @@ impl DbStats {
             self.triangles_all_lods,
             self.segments,
             self.geometry_bytes as f64 / 1e6,
+            self.geometry_bytes as f64 / self.triangles_stored.max(1) as f64,
             self.file_bytes as f64 / 1e6,
         );
         let [lo, hi] = self.bounds;

@@ -29,6 +29,10 @@ fn open_and_read(data: Vec<u8>) {
     for e in db.segments() {
         if let Ok(b) = db.segment(e.id) {
             let _ = GeometryView::parse(&b).map(|v| v.to_mesh());
+            // Compressed segments: whatever decodes must parse.
+            if let Ok(plain) = portico_data::codec::decode(&b) {
+                GeometryView::parse(&plain).expect("a decoded segment parses");
+            }
         }
     }
     if let Ok(Some(g)) = db.cell_graph() {

@@ -113,9 +113,12 @@ impl Http {
                 .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
             return Ok(Payload::Stab(Arc::new(list)));
         }
+        // A compressed segment is decoded here, on the IO thread, into the layout GPUs bind.
+        let plain = portico_data::codec::to_gpu_layout(bytes)
+            .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
         let mesh = self
             .uploader
-            .upload(bytes)
+            .upload(&plain)
             .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
         Ok(Payload::Mesh(mesh))
     }

@@ -11,6 +11,11 @@ use std::sync::Arc;
 
 /// Builds the tiny building (one storey, seed 2) into `dir`; returns the database file.
 pub fn build_tiny(dir: &Path) -> PathBuf {
+    build_tiny_with(dir, &BuildOptions::default())
+}
+
+/// [`build_tiny`] with build options (`dir/tiny.portico`).
+pub fn build_tiny_with(dir: &Path, opts: &BuildOptions) -> PathBuf {
     let params = portico_generator::Params {
         preset: portico_generator::Preset::Tiny,
         seed: 2,
@@ -20,13 +25,7 @@ pub fn build_tiny(dir: &Path) -> PathBuf {
     let glb = dir.join("tiny.glb");
     std::fs::write(&glb, &b.glb).unwrap();
     let db = dir.join("tiny.portico");
-    build(
-        import_file(&glb).unwrap(),
-        &db,
-        &BuildOptions::default(),
-        &Quiet,
-    )
-    .unwrap();
+    build(import_file(&glb).unwrap(), &db, opts, &Quiet).unwrap();
     db
 }
 
@@ -34,7 +33,13 @@ pub fn build_tiny(dir: &Path) -> PathBuf {
 /// URL, the server's state (for its metrics) and the database file.
 pub fn serve_tiny(dir: &Path) -> (String, Arc<AppState>, PathBuf) {
     let db = build_tiny(dir);
-    let state = AppState::open(&db, Config::default()).unwrap();
+    let (url, state) = serve_db(&db);
+    (url, state, db)
+}
+
+/// Serves a database on a background runtime; returns the base URL and the server's state.
+pub fn serve_db(db: &Path) -> (String, Arc<AppState>) {
+    let state = AppState::open(db, Config::default()).unwrap();
     let (tx, rx) = std::sync::mpsc::channel();
     let s = state.clone();
     std::thread::spawn(move || {
@@ -48,7 +53,7 @@ pub fn serve_tiny(dir: &Path) -> (String, Arc<AppState>, PathBuf) {
                 .unwrap();
         });
     });
-    (rx.recv().unwrap(), state, db)
+    (rx.recv().unwrap(), state)
 }
 
 /// Runs the `portico` binary with `args`.

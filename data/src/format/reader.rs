@@ -116,10 +116,18 @@ impl Database {
         Ok(bytes)
     }
 
-    /// The bytes of one LOD's geometry segment, checked to parse (every index in range) and to
+    /// The bytes of one LOD's geometry segment in the layout GPUs bind (decoded first when the
+    /// segment is compressed, [`crate::codec`]), checked to parse (every index in range) and to
     /// agree with its LOD record; borrow its streams with [`GeometryView::parse`].
     pub fn geometry(&self, lod: &LodRecord) -> Result<Bytes> {
-        let bytes = self.segment(lod.segment)?;
+        let raw = self.segment(lod.segment)?;
+        let bytes = if crate::codec::is_compressed(&raw) {
+            Bytes::from(crate::codec::decode(&raw).map_err(|e| {
+                DataError::corrupt(&self.path, format!("segment {}: {e}", lod.segment))
+            })?)
+        } else {
+            raw
+        };
         let view = GeometryView::parse(&bytes)
             .map_err(|e| DataError::corrupt(&self.path, format!("segment {}: {e}", lod.segment)))?;
         if view.header.vertex_count != lod.vertices || view.header.index_count != lod.triangles * 3
@@ -199,7 +207,7 @@ impl Database {
         for e in &self.index {
             let bytes = self.segment(e.id)?;
             if SegmentKind::from_u16(e.kind) == Some(SegmentKind::Geometry) {
-                GeometryView::parse(&bytes).map_err(|err| {
+                crate::codec::to_gpu_layout(&bytes).map_err(|err| {
                     DataError::corrupt(&self.path, format!("segment {}: {err}", e.id))
                 })?;
             }

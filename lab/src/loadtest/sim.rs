@@ -117,7 +117,7 @@ pub struct ClientResult {
 }
 
 /// What the IO task hands the frame loop: segment bodies are just their sizes.
-type Msg = Event<()>;
+type Msg = Event<u64>;
 
 /// What a client task needs.
 #[derive(Debug, Clone)]
@@ -229,10 +229,10 @@ impl Client {
             match m {
                 Event::Segment {
                     id,
+                    body: resident,
                     bytes,
                     listed_at,
-                    ..
-                } => self.arrive(id, bytes, listed_at),
+                } => self.arrive(id, bytes, resident, listed_at),
                 Event::Answer(resp) => {
                     resp.evict.iter().for_each(|&id| self.cache.demote(id));
                     let a = AnswerStat {
@@ -253,7 +253,8 @@ impl Client {
         }
     }
 
-    fn arrive(&mut self, id: u32, bytes: u64, listed_at: Instant) {
+    /// `bytes` came over the wire; the cache is charged `resident`, what they decode to.
+    fn arrive(&mut self, id: u32, bytes: u64, resident: u64, listed_at: Instant) {
         let r = &mut self.result;
         r.latencies.push(listed_at.elapsed().as_secs_f64());
         r.bytes_fetched += bytes;
@@ -262,7 +263,7 @@ impl Client {
             r.bytes_wasted += bytes; // fetched twice
             return;
         }
-        match self.cache.insert(id, (), bytes) {
+        match self.cache.insert(id, (), resident) {
             Ok(released) => {
                 for gone in released {
                     if let Some((b, false)) = self.entries.remove(&gone) {
@@ -486,7 +487,9 @@ struct Linked {
 }
 
 impl Fetcher for Linked {
-    type Body = ();
+    /// What the segment occupies once decoded (a compressed geometry segment is decoded here,
+    /// as the real client's IO thread does, and charged its plain size).
+    type Body = u64;
 
     fn prefetch(
         &self,
@@ -505,7 +508,7 @@ impl Fetcher for Linked {
     fn batch(
         &self,
         ids: Vec<u32>,
-    ) -> impl Future<Output = anyhow::Result<Items<()>>> + Send + 'static {
+    ) -> impl Future<Output = anyhow::Result<Items<u64>>> + Send + 'static {
         let me = self.clone();
         async move {
             me.pipe.send().await;
@@ -517,7 +520,19 @@ impl Fetcher for Linked {
             me.pipe.deliver(total).await;
             Ok(got
                 .into_iter()
-                .map(|(id, b)| (id, b.map(|b| ((), b.len() as u64))))
+                .map(|(id, b)| {
+                    let item = b.and_then(|b| {
+                        let resident = if portico_data::codec::is_compressed(&b) {
+                            portico_data::codec::decode(&b)
+                                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?
+                                .len()
+                        } else {
+                            b.len()
+                        };
+                        Ok((resident as u64, b.len() as u64))
+                    });
+                    (id, item)
+                })
                 .collect())
         }
     }

@@ -94,9 +94,13 @@ impl<'a> Walker<'a> {
                     self.segments_read += 1;
                     self.bytes_read += bytes;
                     self.latencies.push(listed_at.elapsed().as_secs_f64());
-                    // An atlas is charged what it holds on the GPU, not its PNG size.
+                    // An atlas is charged what it holds on the GPU, not its PNG size; a
+                    // compressed mesh what it decoded to.
                     let (value, charge) = match body {
-                        Payload::Mesh(m) => (Resident::Mesh(m), bytes),
+                        Payload::Mesh(m) => {
+                            let gpu = m.gpu_bytes();
+                            (Resident::Mesh(m), bytes.max(gpu))
+                        }
                         Payload::Stab(s) => (Resident::Stab(s), bytes),
                         Payload::Impostor(i) => {
                             let gpu = i.gpu_bytes();

@@ -1,0 +1,225 @@
+//! Compressed geometry segments: quantised attributes through meshoptimizer's vertex and index
+//! codecs (Kapoulkine, "meshoptimizer": `meshopt_encodeVertexBuffer`/`meshopt_encodeIndexBuffer`,
+//! the codecs of glTF's `EXT_meshopt_compression`).
+//!
+//! A compressed segment is a geometry segment whose header carries [`GEOMETRY_MESHOPT`]:
+//!
+//! ```text
+//! 0   GeometryHeader (32 B)  vertex/index counts of the decoded mesh; flags keep
+//!                            GEOMETRY_U32_INDICES of the decoded layout; vertex_offset and
+//!                            index_offset locate the two encoded streams, reserved = their lengths
+//! 32  origin [f32; 3], step [f32; 3]   position = origin + q * step, q: u16 per axis
+//! 56  encoded vertex stream  16 B per vertex before encoding: q [u16; 3], 0u16, the normal's
+//!                            snorm8 bytes and the colour's unorm8 bytes exactly as stored
+//! ..  encoded index stream   triangles, in the order the LOD step optimised them for (the
+//!                            codec keeps order and winding; a triangle may start at another
+//!                            of its corners)
+//! ```
+//!
+//! Positions lose at most half a step: the step is a 65,535th of the segment's extent on each
+//! axis (0.8 mm on a 50 m wall), and never finer than [`MIN_STEP`]; normals and colours are kept
+//! bit for bit. [`decode`] turns such a segment
+//! back into the plain layout of [`encode_geometry`] (what GPUs bind), so everything past the
+//! client's IO thread sees one layout. Segments without the flag are passed through untouched:
+//! files written before compression still open.
+//!
+//! The decoder takes untrusted bytes: counts are bounded by what the encoded streams could
+//! possibly hold before anything is allocated, and the decoded mesh is parsed (every index in
+//! range) before it is returned.
+
+use crate::geometry::{
+    GEOMETRY_MAGIC, GEOMETRY_MESHOPT, GEOMETRY_U32_INDICES, GEOMETRY_VERSION, GeometryHeader,
+    GeometryView, Mesh, Vertex, encode_geometry,
+};
+use bytemuck::{Pod, Zeroable};
+use std::borrow::Cow;
+
+/// One vertex before the vertex codec: quantised position, normal and colour (16 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+struct Packed {
+    q: [u16; 4],
+    normal: [i8; 4],
+    color: [u8; 4],
+}
+
+const HEADER: usize = std::mem::size_of::<GeometryHeader>();
+const QUANT: usize = 24;
+/// The vertex codec writes at least one header bit pair per 16 bytes of a byte channel and a
+/// tail; no honest stream decodes to more than this many bytes per encoded byte.
+const MAX_VERTEX_EXPANSION: usize = 80;
+/// The finest position step (metres): a quarter of a millimetre, far below what a pixel shows at
+/// walking distance; a coarser grid than 16 bits over a small object leaves smaller deltas for
+/// the vertex codec.
+pub const MIN_STEP: f32 = 1.0 / 4096.0;
+/// Most vertices or indices one compressed segment may declare (the decoder refuses more).
+pub const MAX_DECODED_COUNT: u32 = 1 << 26;
+
+/// Encodes a mesh as a compressed geometry segment (layout in the module docs).
+pub fn encode(mesh: &Mesh) -> Vec<u8> {
+    let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+    for v in &mesh.vertices {
+        for a in 0..3 {
+            lo[a] = lo[a].min(v.position[a]);
+            hi[a] = hi[a].max(v.position[a]);
+        }
+    }
+    let origin = if mesh.vertices.is_empty() {
+        [0.0; 3]
+    } else {
+        lo
+    };
+    let step = std::array::from_fn::<f32, 3, _>(|a| {
+        let extent = hi[a] - lo[a];
+        if extent > 0.0 && extent.is_finite() {
+            (extent / 65535.0).max(MIN_STEP)
+        } else {
+            0.0
+        }
+    });
+    let packed: Vec<Packed> = mesh
+        .vertices
+        .iter()
+        .map(|v| Packed {
+            q: std::array::from_fn(|a| {
+                if a == 3 || step[a] == 0.0 {
+                    0
+                } else {
+                    ((v.position[a] - origin[a]) / step[a])
+                        .round()
+                        .clamp(0.0, 65535.0) as u16
+                }
+            }),
+            normal: v.normal,
+            color: v.color,
+        })
+        .collect();
+    let vertices =
+        meshopt::encode_vertex_buffer_level(&packed, 3, Some(1)).expect("meshopt vertex encoding");
+    let indices = if mesh.indices.is_empty() {
+        Vec::new()
+    } else {
+        meshopt::encode_index_buffer(&mesh.indices, mesh.vertices.len())
+            .expect("meshopt index encoding")
+    };
+    let wide = mesh.vertices.len() > u16::MAX as usize + 1;
+    let vertex_offset = HEADER + QUANT;
+    let index_offset = vertex_offset + vertices.len();
+    let header = GeometryHeader {
+        magic: GEOMETRY_MAGIC,
+        version: GEOMETRY_VERSION,
+        flags: GEOMETRY_MESHOPT | if wide { GEOMETRY_U32_INDICES } else { 0 },
+        vertex_count: mesh.vertices.len() as u32,
+        index_count: mesh.indices.len() as u32,
+        vertex_offset: vertex_offset as u32,
+        index_offset: index_offset as u32,
+        reserved: [vertices.len() as u32, indices.len() as u32],
+    };
+    let mut out = Vec::with_capacity(index_offset + indices.len() + 4);
+    out.extend_from_slice(bytemuck::bytes_of(&header));
+    out.extend_from_slice(bytemuck::cast_slice(&origin));
+    out.extend_from_slice(bytemuck::cast_slice(&step));
+    out.extend_from_slice(&vertices);
+    out.extend_from_slice(&indices);
+    out.resize(out.len().next_multiple_of(4), 0);
+    out
+}
+
+/// A geometry segment in the layout GPUs bind: borrowed when it is plain, decoded when it
+/// carries [`GEOMETRY_MESHOPT`]. Errors name what is wrong (one line); the result always parses
+/// with [`GeometryView::parse`].
+pub fn to_gpu_layout(bytes: &[u8]) -> Result<Cow<'_, [u8]>, String> {
+    if is_compressed(bytes) {
+        decode(bytes).map(Cow::Owned)
+    } else {
+        GeometryView::parse(bytes)?;
+        Ok(Cow::Borrowed(bytes))
+    }
+}
+
+/// Whether a segment's header carries [`GEOMETRY_MESHOPT`] (false for anything too short).
+pub fn is_compressed(bytes: &[u8]) -> bool {
+    bytes
+        .get(..HEADER)
+        .map(bytemuck::pod_read_unaligned::<GeometryHeader>)
+        .is_some_and(|h| h.magic == GEOMETRY_MAGIC && h.flags & GEOMETRY_MESHOPT != 0)
+}
+
+/// Decodes a compressed segment into the plain layout of [`encode_geometry`].
+///
+/// Errors: too short, a bad magic or version, streams past the end, counts larger than the
+/// streams could hold (or than [`MAX_DECODED_COUNT`]), a stream meshoptimizer rejects, or a
+/// decoded index out of range.
+pub fn decode(bytes: &[u8]) -> Result<Vec<u8>, String> {
+    let head = bytes.get(..HEADER + QUANT).ok_or_else(|| {
+        format!(
+            "compressed geometry segment of {} bytes is too short",
+            bytes.len()
+        )
+    })?;
+    let h: GeometryHeader = bytemuck::pod_read_unaligned(&head[..HEADER]);
+    if h.magic != GEOMETRY_MAGIC || h.version != GEOMETRY_VERSION || h.flags & GEOMETRY_MESHOPT == 0
+    {
+        return Err("not a compressed geometry segment (bad magic, version or flags)".into());
+    }
+    let quant: [f32; 6] = bytemuck::pod_read_unaligned(&head[HEADER..]);
+    if quant.iter().any(|x| !x.is_finite()) {
+        return Err("compressed geometry segment has a non-finite origin or step".into());
+    }
+    let stream = |offset: u32, len: u32, what: &str| {
+        let start = offset as usize;
+        bytes
+            .get(start..start.saturating_add(len as usize))
+            .ok_or_else(|| format!("compressed {what} stream runs past the end of the segment"))
+    };
+    let vs = stream(h.vertex_offset, h.reserved[0], "vertex")?;
+    let is = stream(h.index_offset, h.reserved[1], "index")?;
+    let (nv, ni) = (h.vertex_count as usize, h.index_count as usize);
+    let too_many = h.vertex_count > MAX_DECODED_COUNT
+        || h.index_count > MAX_DECODED_COUNT
+        || nv * std::mem::size_of::<Packed>() > (vs.len() + 64) * MAX_VERTEX_EXPANSION
+        || ni > is.len() * 3;
+    if too_many {
+        return Err(format!(
+            "compressed geometry segment claims {nv} vertices and {ni} indices, more than its \
+             {} + {} encoded bytes can hold",
+            vs.len(),
+            is.len()
+        ));
+    }
+    if !ni.is_multiple_of(3) {
+        return Err("geometry index count is not a multiple of 3".into());
+    }
+    let packed: Vec<Packed> = if nv == 0 {
+        Vec::new()
+    } else {
+        meshopt::decode_vertex_buffer(vs, nv).map_err(|e| format!("vertex stream: {e}"))?
+    };
+    let indices: Vec<u32> = if ni == 0 {
+        Vec::new()
+    } else {
+        meshopt::decode_index_buffer(is, ni).map_err(|e| format!("index stream: {e}"))?
+    };
+    if let Some(bad) = indices.iter().find(|&&i| i as usize >= nv) {
+        return Err(format!(
+            "geometry index {bad} out of range for {nv} vertices"
+        ));
+    }
+    let (origin, step) = (&quant[..3], &quant[3..]);
+    let vertices = packed
+        .iter()
+        .map(|p| Vertex {
+            position: std::array::from_fn(|a| origin[a] + p.q[a] as f32 * step[a]),
+            normal: p.normal,
+            color: p.color,
+        })
+        .collect();
+    Ok(encode_geometry(&Mesh { vertices, indices }))
+}
+
+/// The largest distance a position moves through [`encode`] then [`decode`] on each axis:
+/// half a quantisation step (metres).
+pub fn position_tolerance(mesh: &Mesh) -> [f32; 3] {
+    let b = mesh.bounds();
+    std::array::from_fn(|a| ((b.max[a] - b.min[a]).max(0.0) / 65535.0).max(MIN_STEP) * 0.5)
+}
