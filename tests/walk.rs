@@ -241,6 +241,19 @@ fn a_compressed_database_looks_the_same_and_the_client_decodes_it() {
     let reference = full_detail(&b, &cfg.path, cfg.size, cfg.fovy);
     let share = differing(&walked, &reference);
     assert!(share <= 0.01, "{:.1} % of pixels differ", share * 100.0);
+    // A tiny cache holds what the segments decode to, not what they weighed on the wire: the
+    // GPU never holds more than the budget.
+    let budget = 48 << 10;
+    let mut cfg = config(cfg.server, packed_dir.join("walk-tiny"), budget);
+    cfg.max_frames = Some(60);
+    let s = walk(&cfg, &mut |_, _| {}).unwrap();
+    assert_eq!(s.io_failures, 0);
+    assert!(s.evictions > 0 && s.drawn_triangles.max > 0.0);
+    assert!(
+        s.gpu_held_peak_bytes <= budget,
+        "{} bytes held on the GPU, budget {budget}",
+        s.gpu_held_peak_bytes
+    );
 }
 
 /// A TCP proxy that holds every chunk from the server for `delay` before passing it on: a slow

@@ -234,6 +234,17 @@ pub struct GeometryHeader {
     pub reserved: [u32; 2],
 }
 
+/// The length in bytes of [`encode_geometry`]'s segment for a mesh of `vertices` vertices and
+/// `triangles` triangles: what a geometry segment occupies once decoded, whatever it weighed
+/// on the wire.
+pub fn plain_size(vertices: u32, triangles: u32) -> u64 {
+    let wide = vertices as usize > u16::MAX as usize + 1;
+    let indices = triangles as u64 * 3 * if wide { 4 } else { 2 };
+    let head = std::mem::size_of::<GeometryHeader>() as u64;
+    let stream = vertices as u64 * std::mem::size_of::<Vertex>() as u64;
+    head + stream + indices.next_multiple_of(4)
+}
+
 /// Encodes a mesh as a geometry segment (header, vertices, indices).
 pub fn encode_geometry(mesh: &Mesh) -> Vec<u8> {
     let wide = mesh.vertices.len() > u16::MAX as usize + 1;
@@ -361,6 +372,20 @@ mod tests {
             .collect();
         let indices = (0..n as u32 - 2).flat_map(|i| [0, i + 1, i + 2]).collect();
         Mesh { vertices, indices }
+    }
+
+    #[test]
+    fn plain_size_is_the_encoded_length() {
+        // One triangle (6 index bytes, padded), two (12, no padding), narrow and wide indices.
+        for n in [3usize, 4, 7, 65_536, 65_537, 70_000] {
+            let m = quad(n);
+            let (v, t) = (m.vertices.len() as u32, m.triangle_count() as u32);
+            assert_eq!(
+                plain_size(v, t),
+                encode_geometry(&m).len() as u64,
+                "{n} vertices"
+            );
+        }
     }
 
     #[test]

@@ -24,6 +24,18 @@ fn tiny(
     no_cells: bool,
     painter: Option<&mut dyn portico_data::hierarchy::ImpostorPainter>,
 ) -> Prefetcher {
+    let opts = BuildOptions {
+        no_cells,
+        ..BuildOptions::default()
+    };
+    tiny_with(&opts, painter)
+}
+
+/// [`tiny`] with any build options.
+fn tiny_with(
+    opts: &BuildOptions,
+    painter: Option<&mut dyn portico_data::hierarchy::ImpostorPainter>,
+) -> Prefetcher {
     let params = portico_generator::Params {
         preset: portico_generator::Preset::Tiny,
         seed: 5,
@@ -34,11 +46,7 @@ fn tiny(
     let glb = dir.path().join("tiny.glb");
     std::fs::write(&glb, &b.glb).unwrap();
     let out = dir.path().join("tiny.portico");
-    let opts = BuildOptions {
-        no_cells,
-        ..BuildOptions::default()
-    };
-    portico_data::build::build_with(import_file(&glb).unwrap(), &out, &opts, &Quiet, painter)
+    portico_data::build::build_with(import_file(&glb).unwrap(), &out, opts, &Quiet, painter)
         .unwrap();
     // The map stays valid after the directory is removed (the inode lives on).
     let db = Arc::new(Database::open(&out).unwrap());
@@ -847,4 +855,37 @@ fn the_lookahead_stops_at_the_cache_size_but_keeps_the_view() {
             "no_cells {no_cells}: the cache never stopped a lookahead"
         );
     }
+}
+
+/// The lookahead claims what segments occupy decoded: a compressed database reads ahead exactly
+/// what the plain one does (its segments weigh a third on the wire, but not in the cache).
+#[test]
+fn compression_does_not_stretch_the_lookahead_past_the_cache() {
+    let plain = prefetcher(false);
+    let opts = BuildOptions {
+        compress: true,
+        ..BuildOptions::default()
+    };
+    let packed = tiny_with(&opts, None);
+    let mut compared = 0;
+    for obs in observers(plain) {
+        for cache in [64u64 << 10, 1 << 20] {
+            let policy = Policy {
+                cache_bytes: cache,
+                read_bytes: 1 << 30,
+                range_cull: RangeCull::Any,
+                depth_frames: 64,
+                ..Policy::default()
+            };
+            let ids = |p: &Prefetcher| -> Vec<u32> {
+                let r = p.answer(&obs, &policy, &HashSet::new()).unwrap();
+                let mut v: Vec<u32> = r.items.iter().map(|i| i.segment).collect();
+                v.sort_unstable();
+                v
+            };
+            assert_eq!(ids(plain), ids(&packed), "cache {cache}");
+            compared += 1;
+        }
+    }
+    assert!(compared > 10);
 }

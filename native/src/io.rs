@@ -50,6 +50,9 @@ pub struct Catalogue {
     pub stabs: HashSet<u32>,
     /// Texture segments: the box and atlas tile of the cluster each belongs to.
     pub textures: HashMap<u32, (Aabb, u32)>,
+    /// Geometry segments by the bytes they occupy decoded (more than their wire length when
+    /// compressed): what the IO window and the cache are charged.
+    pub decoded: HashMap<u32, u64>,
 }
 
 /// The real client's [`Fetcher`]: HTTP, checksum, decode, GPU upload.
@@ -89,10 +92,15 @@ impl Fetcher for Http {
     }
 
     fn bytes(&self, id: u32) -> u64 {
-        self.catalogue
+        let wire = self
+            .catalogue
             .segments
             .get(id as usize)
-            .map_or(0, |s| s.bytes)
+            .map_or(0, |s| s.bytes);
+        self.catalogue
+            .decoded
+            .get(&id)
+            .map_or(wire, |&d| d.max(wire))
     }
 }
 

@@ -105,6 +105,21 @@ impl InstanceRecord {
 }
 
 impl Header {
+    /// Every LOD's geometry segment with the bytes it occupies decoded
+    /// ([`crate::geometry::plain_size`]): a compressed segment's wire length says less.
+    pub fn decoded_sizes(&self) -> impl Iterator<Item = (u32, u64)> + '_ {
+        self.objects
+            .iter()
+            .flat_map(|o| &o.lods)
+            .chain(self.instances.iter().flat_map(|i| i.lods.iter().flatten()))
+            .map(|l| {
+                (
+                    l.segment,
+                    crate::geometry::plain_size(l.vertices, l.triangles),
+                )
+            })
+    }
+
     /// The LODs an instance draws with: its own, else its definition's (finest first).
     pub fn lods_of<'a>(&'a self, inst: &'a InstanceRecord) -> &'a [LodRecord] {
         match &inst.lods {

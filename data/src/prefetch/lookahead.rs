@@ -187,7 +187,8 @@ impl Prefetcher {
         Ok(cands)
     }
 
-    /// Adds the LODs of one object from the coarsest up to its maximum; returns their bytes.
+    /// Adds the LODs of one object from the coarsest up to its maximum; returns the bytes they
+    /// will occupy in the client's cache (decoded: a compressed segment claims its plain size).
     fn add_object(
         &self,
         o: u32,
@@ -206,7 +207,7 @@ impl Prefetcher {
         let mut bytes = 0;
         for (i, l) in lods.iter().enumerate().skip(max) {
             let b = self.segment_bytes(l.segment);
-            bytes += b;
+            bytes += crate::geometry::plain_size(l.vertices, l.triangles).max(b);
             cands.push(Candidate {
                 now: false,
                 object: o,

@@ -405,7 +405,7 @@ impl Client {
                 if !seen.insert(s) {
                     continue;
                 }
-                bytes += w.bytes(s);
+                bytes += w.decoded(s);
                 if j > 0 && bytes > self.cache.budget() {
                     break 'frames;
                 }
@@ -537,8 +537,9 @@ impl Fetcher for Linked {
         }
     }
 
+    /// What the IO window is charged: the decoded size.
     fn bytes(&self, id: u32) -> u64 {
-        self.world.bytes(id)
+        self.world.decoded(id)
     }
 }
 

@@ -56,8 +56,10 @@ pub struct World {
     pub bounds: Vec<Aabb>,
     /// Database id from the manifest.
     pub database_id: String,
-    /// Bytes of every segment, by id.
+    /// Bytes of every segment on the wire, by id.
     pub seg_bytes: Vec<u64>,
+    /// Bytes of every segment once decoded (a compressed geometry segment's plain size), by id.
+    pub decoded_bytes: Vec<u64>,
     /// Decoded stab lists by cell.
     pub stabs: HashMap<u32, Arc<StabList>>,
     /// The path, one entry per frame.
@@ -80,6 +82,11 @@ impl World {
     /// Bytes of a segment.
     pub fn bytes(&self, id: u32) -> u64 {
         self.seg_bytes.get(id as usize).copied().unwrap_or(0)
+    }
+
+    /// What a segment occupies in a client's cache: its decoded size.
+    pub fn decoded(&self, id: u32) -> u64 {
+        self.decoded_bytes.get(id as usize).copied().unwrap_or(0)
     }
 
     /// The segment of a cell's stab list.
@@ -186,11 +193,18 @@ pub struct Plan {
 pub async fn load(remote: &Remote, path: &CameraPath, plan: Plan) -> Result<World> {
     let (m, graph) = remote.model().await.context("loading the model")?;
     let far = view::far_plane(&m.header.bounds);
+    let mut decoded_bytes: Vec<u64> = m.segments.iter().map(|s| s.bytes).collect();
+    for (seg, size) in m.header.decoded_sizes() {
+        if let Some(b) = decoded_bytes.get_mut(seg as usize) {
+            *b = (*b).max(size);
+        }
+    }
     let mut world = World {
         bounds: m.header.instances.iter().map(|i| i.bounds).collect(),
         header: m.header,
         graph,
         database_id: m.database_id,
+        decoded_bytes,
         seg_bytes: m.segments.iter().map(|s| s.bytes).collect(),
         stabs: HashMap::new(),
         frames: path_frames(path, plan.dt, far),

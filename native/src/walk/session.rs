@@ -172,6 +172,7 @@ fn load_model(remote: &Remote) -> Result<Model> {
             segments: m.segments,
             stabs,
             textures,
+            decoded: m.header.decoded_sizes().collect(),
         },
         header: m.header,
         graph,
