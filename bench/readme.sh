@@ -56,8 +56,11 @@ step generate --preset soda -o soda.glb
 step build soda.glb -o soda.portico
 step build soda.glb -o soda.nohier.portico --no-hierarchy
 step build soda.glb -o soda.flat.portico --flatten
-ls -l soda.glb soda.portico soda.nohier.portico soda.flat.portico
+step build soda.glb -o soda.flat.z.portico --flatten --compress
+ls -l soda.glb soda.portico soda.nohier.portico soda.flat.portico soda.flat.z.portico
 step inspect soda.portico
+step inspect soda.flat.portico
+step inspect soda.flat.z.portico
 step path --db soda.portico --kind tour --legs 6 -o tour.json
 step verify soda.portico --rays 50000
 step cull soda.portico --tour 20
@@ -76,6 +79,11 @@ step loadtest --clients 8 --path tour.json --max-frames 400 --policy depth=16,gr
 if [ -n "$sweep" ]; then
   step loadtest --clients 8 --path tour.json --sweep --link rtt=20ms,rate=100mbit -o lt_sweep
 fi
+step loadtest --clients 8 --path tour.json --max-frames 400 --link rtt=50ms,rate=10mbit --policy depth=16,gran=object,range=frustum,look=any -o lt-slow
+stop
+
+serve soda.flat.z.portico
+step loadtest --clients 8 --path tour.json --max-frames 400 --link rtt=50ms,rate=10mbit --policy depth=16,gran=object,range=frustum,look=any -o lt-slow-z
 stop
 
 step bench --db soda.portico --path tour.json --size 640x480 --max-frames 400 --budget-ms 50 -o b
