@@ -171,27 +171,40 @@ impl Schedule {
     /// [`BATCH_BYTES`] (at least one) and within the window (a segment alone when nothing is
     /// outstanding); `bytes` gives a segment's size.
     pub fn next_batch(&mut self, now: Instant, bytes: impl Fn(u32) -> u64) -> Vec<u32> {
+        self.next_batch_sized(now, &bytes, &bytes)
+    }
+
+    /// [`Schedule::next_batch`] where a segment's bytes on the wire (`wire`: what a request
+    /// carries, bounded by [`BATCH_BYTES`]) differ from what it occupies once decoded (`held`:
+    /// what the window counts) — a compressed geometry segment.
+    pub fn next_batch_sized(
+        &mut self,
+        now: Instant,
+        wire: &impl Fn(u32) -> u64,
+        held: &impl Fn(u32) -> u64,
+    ) -> Vec<u32> {
         let mut ids = Vec::new();
-        let mut total = 0u64;
+        let (mut total, mut total_held) = (0u64, 0u64);
         while ids.len() < BATCH_ITEMS {
             let Some(id) = self.peek(now) else { break };
-            let b = bytes(id);
+            let (b, h) = (wire(id), held(id));
             if !ids.is_empty() && total + b > BATCH_BYTES {
                 break;
             }
             let alone = ids.is_empty() && self.outstanding_bytes == 0;
             if self
                 .window
-                .is_some_and(|w| self.outstanding_bytes + total + b > w && !alone)
+                .is_some_and(|w| self.outstanding_bytes + total_held + h > w && !alone)
             {
                 break;
             }
             self.take(id);
             total += b;
+            total_held += h;
             ids.push(id);
         }
         for &id in &ids {
-            let b = bytes(id);
+            let b = held(id);
             self.outstanding.insert(id, b);
             self.outstanding_bytes += b;
         }
@@ -276,6 +289,29 @@ mod tests {
         let mut u = Schedule::default();
         u.refresh(vec![3, 4, 5, 9, 2], t0);
         assert_eq!(u.next_batch(t0, size), vec![3, 4, 5, 9, 2]);
+    }
+
+    /// Compressed segments: a request is sized by what it carries on the wire, the window by
+    /// what the segments will occupy decoded.
+    #[test]
+    fn batches_count_wire_bytes_and_the_window_counts_decoded_bytes() {
+        let t0 = Instant::now();
+        let ids: Vec<u32> = (1..=10).collect();
+        // Decoded 4x the wire size: the window (1000) holds two, not eight.
+        let mut s = Schedule::with_window(1000);
+        s.refresh(ids.clone(), t0);
+        assert_eq!(s.next_batch_sized(t0, &|_| 100, &|_| 400), vec![1, 2]);
+        assert_eq!(s.outstanding_bytes(), 800);
+        // Without a window, BATCH_BYTES bounds the wire bytes: 100 KiB each, two per request,
+        // however little they hold decoded...
+        let mut u = Schedule::default();
+        u.refresh(ids.clone(), t0);
+        assert_eq!(u.next_batch_sized(t0, &|_| 100 << 10, &|_| 1), vec![1, 2]);
+        // ...and small on the wire, many fit though they are large decoded.
+        let mut v = Schedule::default();
+        v.refresh(ids, t0);
+        let n = v.next_batch_sized(t0, &|_| 1 << 10, &|_| 100 << 10).len();
+        assert_eq!(n, BATCH_ITEMS.min(10));
     }
 
     #[test]

@@ -395,12 +395,18 @@ fn write_flattened(
     Ok(records)
 }
 
-/// A mesh's geometry segment, plain or compressed.
+/// A mesh's geometry segment: compressed when asked for and when that is smaller and decodes
+/// (a box of a dozen triangles is smaller plain: the compressed form's fixed costs), else plain.
 fn segment(mesh: &crate::geometry::Mesh, compress: bool) -> Vec<u8> {
-    if compress {
-        crate::codec::encode(mesh)
+    let plain = encode_geometry(mesh);
+    if !compress {
+        return plain;
+    }
+    let packed = crate::codec::encode(mesh);
+    if packed.len() < plain.len() && crate::codec::decode(&packed).is_ok() {
+        packed
     } else {
-        encode_geometry(mesh)
+        plain
     }
 }
 

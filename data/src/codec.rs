@@ -45,9 +45,12 @@ struct Packed {
 
 const HEADER: usize = std::mem::size_of::<GeometryHeader>();
 const QUANT: usize = 24;
-/// The vertex codec writes at least one header bit pair per 16 bytes of a byte channel and a
-/// tail; no honest stream decodes to more than this many bytes per encoded byte.
-const MAX_VERTEX_EXPANSION: usize = 80;
+/// The vertex codec (version 1) spends nothing on a byte channel whose deltas are all zero: a
+/// block of 256 identical 16-byte vertices costs 4 bytes. No stream it writes decodes to more
+/// than about 1,024 bytes per encoded byte; a header claiming more is refused before anything
+/// is allocated. (Builds keep a segment plain unless its compressed form decodes, so nothing
+/// written is ever refused.)
+const MAX_VERTEX_EXPANSION: usize = 1100;
 /// The finest position step (metres): a quarter of a millimetre, far below what a pixel shows at
 /// walking distance; a coarser grid than 16 bits over a small object leaves smaller deltas for
 /// the vertex codec.
@@ -69,10 +72,12 @@ pub fn encode(mesh: &Mesh) -> Vec<u8> {
     } else {
         lo
     };
+    // A whole number of steps spans each axis, so the largest coordinate lands on the grid and
+    // no decoded vertex leaves the mesh's bounds.
     let step = std::array::from_fn::<f32, 3, _>(|a| {
         let extent = hi[a] - lo[a];
         if extent > 0.0 && extent.is_finite() {
-            (extent / 65535.0).max(MIN_STEP)
+            extent / (extent / MIN_STEP).ceil().clamp(1.0, 65535.0)
         } else {
             0.0
         }
@@ -139,10 +144,16 @@ pub fn to_gpu_layout(bytes: &[u8]) -> Result<Cow<'_, [u8]>, String> {
 
 /// Whether a segment's header carries [`GEOMETRY_MESHOPT`] (false for anything too short).
 pub fn is_compressed(bytes: &[u8]) -> bool {
+    compressed_header(bytes).is_some()
+}
+
+/// The header of a compressed segment (`None` for anything else): its counts say what the
+/// segment will decode to, so a caller can check them against the LOD record before decoding.
+pub fn compressed_header(bytes: &[u8]) -> Option<GeometryHeader> {
     bytes
         .get(..HEADER)
         .map(bytemuck::pod_read_unaligned::<GeometryHeader>)
-        .is_some_and(|h| h.magic == GEOMETRY_MAGIC && h.flags & GEOMETRY_MESHOPT != 0)
+        .filter(|h| h.magic == GEOMETRY_MAGIC && h.flags & GEOMETRY_MESHOPT != 0)
 }
 
 /// Decodes a compressed segment into the plain layout of [`encode_geometry`].
@@ -181,8 +192,8 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<u8>, String> {
         || ni > is.len() * 3;
     if too_many {
         return Err(format!(
-            "compressed geometry segment claims {nv} vertices and {ni} indices, more than its \
-             {} + {} encoded bytes can hold",
+            "compressed geometry segment claims {nv} vertices and {ni} indices: more than its \
+             {} + {} encoded bytes can hold, or than {MAX_DECODED_COUNT}",
             vs.len(),
             is.len()
         ));
@@ -221,5 +232,8 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<u8>, String> {
 /// half a quantisation step (metres).
 pub fn position_tolerance(mesh: &Mesh) -> [f32; 3] {
     let b = mesh.bounds();
-    std::array::from_fn(|a| ((b.max[a] - b.min[a]).max(0.0) / 65535.0).max(MIN_STEP) * 0.5)
+    std::array::from_fn(|a| {
+        let extent = (b.max[a] - b.min[a]).max(0.0);
+        extent / (extent / MIN_STEP).ceil().clamp(1.0, 65535.0) * 0.5
+    })
 }

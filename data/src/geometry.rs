@@ -3,7 +3,8 @@
 //! A geometry segment is laid out for direct GPU upload: a 32-byte header, then the
 //! interleaved vertex stream (`Vertex`, 20 bytes: position `f32x3`, normal `snorm8x4`, colour
 //! `unorm8x4`), then the index stream (`u16` when every index fits, else `u32`), each 4-byte
-//! aligned. A client binds the vertex and index ranges straight from the bytes it received.
+//! aligned. A client binds the vertex and index ranges straight from these bytes (a compressed
+//! segment, [`GEOMETRY_MESHOPT`], is decoded into this layout first).
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat3, Mat4, Vec3};
@@ -220,7 +221,7 @@ pub struct GeometryHeader {
     pub magic: u32,
     /// [`GEOMETRY_VERSION`].
     pub version: u16,
-    /// [`GEOMETRY_U32_INDICES`] or 0.
+    /// [`GEOMETRY_U32_INDICES`] (of the plain layout) and/or [`GEOMETRY_MESHOPT`], or 0.
     pub flags: u16,
     /// Number of vertices.
     pub vertex_count: u32,
@@ -230,7 +231,7 @@ pub struct GeometryHeader {
     pub vertex_offset: u32,
     /// Byte offset of the index stream within the segment.
     pub index_offset: u32,
-    /// Reserved, zero.
+    /// Zero in a plain segment; a compressed one's encoded vertex and index stream lengths.
     pub reserved: [u32; 2],
 }
 

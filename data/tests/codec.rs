@@ -156,6 +156,63 @@ fn plain_segments_pass_through_and_compressed_ones_are_not_parsed_raw() {
     );
 }
 
+/// A grid of `n` vertices in strips (many codec blocks; wide indices past 65,536 vertices).
+fn strip(n: u32) -> Mesh {
+    let w = 256u32;
+    let vertices = (0..n)
+        .map(|i| {
+            let (x, z) = ((i % w) as f32 * 0.05, (i / w) as f32 * 0.05);
+            Vertex::new(
+                [x, (x * 3.0).sin() * 0.1, z],
+                [0.0, 1.0, 0.0],
+                [0.2, 0.4, (i % 7) as f32 / 7.0, 1.0],
+            )
+        })
+        .collect();
+    let indices = (0..n.saturating_sub(w + 1))
+        .filter(|i| i % w != w - 1)
+        .flat_map(|i| [i, i + w, i + 1, i + 1, i + w, i + w + 1])
+        .collect();
+    Mesh { vertices, indices }
+}
+
+#[test]
+fn large_meshes_and_repeated_vertices_round_trip() {
+    // 70,000 vertices: 274 codec blocks and u32 indices in the plain layout.
+    for mesh in [strip(1_000), strip(70_000)] {
+        let back = GeometryView::parse(&decode(&encode(&mesh)).unwrap())
+            .unwrap()
+            .to_mesh();
+        assert_eq!(rotated(&back.indices), rotated(&mesh.indices));
+        let tol = codec::position_tolerance(&mesh);
+        let b = mesh.bounds();
+        for (a, v) in back.vertices.iter().zip(&mesh.vertices) {
+            assert_eq!((a.normal, a.color), (v.normal, v.color));
+            for (k, t) in tol.iter().enumerate() {
+                let p = a.position[k];
+                assert!((p - v.position[k]).abs() <= t * 1.001 + 1e-6);
+                // The grid ends on the largest coordinate: nothing leaves the bounds (but for
+                // the last bit of a float).
+                assert!(
+                    p >= b.min[k] - 1e-5 && p <= b.max[k] + 1e-5,
+                    "axis {k}: {p} outside"
+                );
+            }
+        }
+    }
+    // 20,000 identical vertices cost almost nothing to encode and must still decode.
+    let same = Mesh {
+        vertices: vec![quad().vertices[1]; 20_000],
+        indices: vec![0, 1, 2],
+    };
+    let packed = encode(&same);
+    assert!(packed.len() < 1_000, "{} bytes", packed.len());
+    let back = GeometryView::parse(&decode(&packed).unwrap())
+        .unwrap()
+        .to_mesh();
+    assert_eq!(back.vertices.len(), 20_000);
+}
+
 #[test]
 fn damaged_or_hostile_segments_are_refused_not_panicked_on() {
     let packed = encode(&quad());

@@ -71,8 +71,13 @@ pub trait Fetcher: Clone + Send + Sync + 'static {
         &self,
         ids: Vec<u32>,
     ) -> impl Future<Output = anyhow::Result<Items<Self::Body>>> + Send + 'static;
-    /// A segment's size in bytes (from the manifest), to size the batches.
+    /// A segment's size in bytes on the wire (from the manifest), to size the batches.
     fn bytes(&self, id: u32) -> u64;
+    /// What a segment occupies once decoded (more than [`Fetcher::bytes`] for a compressed
+    /// geometry segment), to keep the window.
+    fn held_bytes(&self, id: u32) -> u64 {
+        self.bytes(id)
+    }
 }
 
 /// Runs the IO stage until the frame loop goes away: keeps up to `parallel` segment fetches
@@ -101,7 +106,9 @@ pub async fn drive<F: Fetcher>(
             asking = Some(ask_server(&fetcher, &mut s, policy, ask));
         }
         while fetches.len() < parallel.max(1) {
-            let ids = s.next_batch(Instant::now(), |id| fetcher.bytes(id));
+            let ids = s.next_batch_sized(Instant::now(), &|id| fetcher.bytes(id), &|id| {
+                fetcher.held_bytes(id)
+            });
             if ids.is_empty() {
                 break;
             }

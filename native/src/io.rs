@@ -92,11 +92,14 @@ impl Fetcher for Http {
     }
 
     fn bytes(&self, id: u32) -> u64 {
-        let wire = self
-            .catalogue
+        self.catalogue
             .segments
             .get(id as usize)
-            .map_or(0, |s| s.bytes);
+            .map_or(0, |s| s.bytes)
+    }
+
+    fn held_bytes(&self, id: u32) -> u64 {
+        let wire = self.bytes(id);
         self.catalogue
             .decoded
             .get(&id)
@@ -121,7 +124,15 @@ impl Http {
                 .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
             return Ok(Payload::Stab(Arc::new(list)));
         }
-        // A compressed segment is decoded here, on the IO thread, into the layout GPUs bind.
+        // A compressed segment is decoded here, on the IO thread, into the layout GPUs bind;
+        // first what it claims to decode to must be what its LOD record says, which bounds
+        // what decoding allocates.
+        if let Some(h) = portico_data::codec::compressed_header(bytes) {
+            let claims = portico_data::geometry::plain_size(h.vertex_count, h.index_count / 3);
+            if self.catalogue.decoded.get(&id) != Some(&claims) || h.index_count % 3 != 0 {
+                anyhow::bail!("segment {id}: its counts disagree with its LOD record");
+            }
+        }
         let plain = portico_data::codec::to_gpu_layout(bytes)
             .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
         let mesh = self

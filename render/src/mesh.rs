@@ -1,5 +1,6 @@
-//! Geometry segments on the GPU: a segment's vertex and index streams become buffers byte for
-//! byte, so the cache's byte budget is the segments' size.
+//! Geometry segments on the GPU: a plain segment's vertex and index streams become buffers byte
+//! for byte, so the cache's byte budget is the segments' decoded size (a compressed segment is
+//! decoded before it gets here).
 
 use crate::{GpuImpostor, RenderError, scoped, textured};
 use glam::Vec3;

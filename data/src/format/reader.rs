@@ -121,6 +121,18 @@ impl Database {
     /// agree with its LOD record; borrow its streams with [`GeometryView::parse`].
     pub fn geometry(&self, lod: &LodRecord) -> Result<Bytes> {
         let raw = self.segment(lod.segment)?;
+        let disagrees = || {
+            DataError::corrupt(
+                &self.path,
+                format!("segment {} disagrees with its LOD record", lod.segment),
+            )
+        };
+        if let Some(h) = crate::codec::compressed_header(&raw) {
+            // Checked before decoding: the record bounds what decoding may allocate.
+            if h.vertex_count != lod.vertices || h.index_count as u64 != lod.triangles as u64 * 3 {
+                return Err(disagrees());
+            }
+        }
         let bytes = if crate::codec::is_compressed(&raw) {
             Bytes::from(crate::codec::decode(&raw).map_err(|e| {
                 DataError::corrupt(&self.path, format!("segment {}: {e}", lod.segment))
@@ -130,12 +142,10 @@ impl Database {
         };
         let view = GeometryView::parse(&bytes)
             .map_err(|e| DataError::corrupt(&self.path, format!("segment {}: {e}", lod.segment)))?;
-        if view.header.vertex_count != lod.vertices || view.header.index_count != lod.triangles * 3
+        if view.header.vertex_count != lod.vertices
+            || view.header.index_count as u64 != lod.triangles as u64 * 3
         {
-            return Err(DataError::corrupt(
-                &self.path,
-                format!("segment {} disagrees with its LOD record", lod.segment),
-            ));
+            return Err(disagrees());
         }
         Ok(bytes)
     }

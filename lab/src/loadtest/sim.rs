@@ -537,8 +537,12 @@ impl Fetcher for Linked {
         }
     }
 
-    /// What the IO window is charged: the decoded size.
     fn bytes(&self, id: u32) -> u64 {
+        self.world.bytes(id)
+    }
+
+    /// What the IO window is charged: the decoded size.
+    fn held_bytes(&self, id: u32) -> u64 {
         self.world.decoded(id)
     }
 }
