@@ -80,10 +80,12 @@ if [ -n "$sweep" ]; then
   step loadtest --clients 8 --path tour.json --sweep --link rtt=20ms,rate=100mbit -o lt_sweep
 fi
 step loadtest --clients 8 --path tour.json --max-frames 400 --link rtt=50ms,rate=10mbit --policy depth=16,gran=object,range=frustum,look=any -o lt-slow
+step loadtest --clients 8 --path tour.json --max-frames 400 --link rtt=20ms,rate=100mbit --policy depth=16,gran=object,range=frustum,look=any -o lt-fast
 stop
 
 serve soda.flat.z.portico
 step loadtest --clients 8 --path tour.json --max-frames 400 --link rtt=50ms,rate=10mbit --policy depth=16,gran=object,range=frustum,look=any -o lt-slow-z
+step loadtest --clients 8 --path tour.json --max-frames 400 --link rtt=20ms,rate=100mbit --policy depth=16,gran=object,range=frustum,look=any -o lt-fast-z
 stop
 
 step bench --db soda.portico --path tour.json --size 640x480 --max-frames 400 --budget-ms 50 -o b
