@@ -16,9 +16,9 @@
 //!                            of its corners)
 //! ```
 //!
-//! Positions lose at most half a step: the step is a 65,535th of the segment's extent on each
-//! axis (0.8 mm on a 50 m wall), and never finer than [`MIN_STEP`]; normals and colours are kept
-//! bit for bit. [`decode`] turns such a segment
+//! Positions lose at most half a step. Each axis's extent is cut into whole steps: as few as
+//! keep a step within [`MIN_STEP`], and at most 65,535 (a 50 m wall gets 0.76 mm steps).
+//! Normals and colours are kept bit for bit. [`decode`] turns such a segment
 //! back into the plain layout of [`encode_geometry`] (what GPUs bind), so everything past the
 //! client's IO thread sees one layout. Segments without the flag are passed through untouched:
 //! files written before compression still open.
@@ -51,9 +51,10 @@ const QUANT: usize = 24;
 /// is allocated. (Builds keep a segment plain unless its compressed form decodes, so nothing
 /// written is ever refused.)
 const MAX_VERTEX_EXPANSION: usize = 1100;
-/// The finest position step (metres): a quarter of a millimetre, far below what a pixel shows at
-/// walking distance; a coarser grid than 16 bits over a small object leaves smaller deltas for
-/// the vertex codec.
+/// The step a small object's positions are rounded to, at most (metres): a quarter of a
+/// millimetre, far below what a pixel shows at walking distance. A grid coarser than 16 bits
+/// over a small object leaves smaller deltas for the vertex codec; past 16 m an axis gets 65,535
+/// steps instead.
 pub const MIN_STEP: f32 = 1.0 / 4096.0;
 /// Most vertices or indices one compressed segment may declare (the decoder refuses more).
 pub const MAX_DECODED_COUNT: u32 = 1 << 26;
