@@ -21,6 +21,12 @@ fn fails(args: &[&str]) -> String {
 fn generated(dir: &Path) -> PathBuf {
     let glb = dir.join("tiny.glb");
     let _ = ok(&["generate", "--preset", "tiny", "--seed", "5", "-o", s(&glb)]);
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = std::fs::metadata(&glb).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode, 0o644, "other tools and users can read the model");
+    }
     glb
 }
 

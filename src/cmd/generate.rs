@@ -73,6 +73,15 @@ fn write_atomically(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
         .unwrap_or(std::path::Path::new("."));
     let mut tmp = tempfile::NamedTempFile::new_in(dir)
         .with_context(|| format!("{}: cannot create a file there", dir.display()))?;
+    // A temporary file is private (0600); a model is meant to be read by other tools and users
+    // (a web server, a viewer), so it is world-readable like any file a generator writes.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        tmp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))
+            .with_context(|| format!("{}: cannot set its permissions", path.display()))?;
+    }
     tmp.write_all(bytes)
         .and_then(|_| tmp.as_file().sync_all())
         .with_context(|| format!("{}: write failed", path.display()))?;
