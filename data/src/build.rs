@@ -11,6 +11,7 @@ use crate::error::Result;
 use crate::format::writer::{DbWriter, WriteSummary};
 use crate::format::{
     CellIndex, Header, InstanceRecord, LodRecord, ObjectRecord, SegmentKind, encode_segment,
+    segment_flags,
 };
 use crate::geometry::{Aabb, encode_geometry};
 use crate::hierarchy::{self, Hierarchy, ImpostorPainter, PaintItem};
@@ -411,10 +412,24 @@ fn segment(mesh: &crate::geometry::Mesh, compress: bool) -> Vec<u8> {
 }
 
 fn write_lod(w: &mut DbWriter, l: &LodMesh, bytes: Vec<u8>, error: f32) -> Result<LodRecord> {
+    let (triangles, vertices) = (l.mesh.triangle_count() as u32, l.mesh.vertices.len() as u32);
+    let segment = if crate::codec::is_compressed(&bytes) {
+        // The index says so, with the size it decodes to: inspect and old readers see it
+        // without reading the segment.
+        let decoded = crate::geometry::plain_size(vertices, triangles);
+        w.add_segment_flagged(
+            SegmentKind::Geometry,
+            &bytes,
+            segment_flags::MESHOPT,
+            decoded,
+        )?
+    } else {
+        w.add_segment(SegmentKind::Geometry, &bytes)?
+    };
     Ok(LodRecord {
-        segment: w.add_segment(SegmentKind::Geometry, &bytes)?,
-        triangles: l.mesh.triangle_count() as u32,
-        vertices: l.mesh.vertices.len() as u32,
+        segment,
+        triangles,
+        vertices,
         error,
     })
 }

@@ -2,8 +2,8 @@
 //! modelling statistics: per LOD level, how many object instances have it and how many polygons
 //! they use — min, mean and max per object).
 
-use crate::format::SegmentKind;
 use crate::format::reader::Database;
+use crate::format::{SegmentKind, segment_flags};
 use serde::Serialize;
 
 /// One row of the Table 3.1-style LOD table.
@@ -52,6 +52,11 @@ pub struct DbStats {
     pub geometry_bytes: u64,
     /// Triangles stored in geometry segments, every LOD once (a shared definition counts once).
     pub triangles_stored: u64,
+    /// Geometry segments stored meshopt-compressed (`portico build --compress`).
+    pub compressed_segments: u64,
+    /// Bytes the geometry segments occupy decoded (equal to `geometry_bytes` when none is
+    /// compressed).
+    pub geometry_decoded_bytes: u64,
     /// Total file size.
     pub file_bytes: u64,
     /// Bounds (min, max) in metres, relative to `origin`.
@@ -112,12 +117,11 @@ pub fn stats(db: &Database) -> DbStats {
         "all".into(),
         per_instance.iter().map(|l| l.iter().sum()),
     ));
-    let geometry_bytes = db
+    let geometry = db
         .segments()
         .iter()
-        .filter(|s| s.kind == SegmentKind::Geometry as u16)
-        .map(|s| s.length)
-        .sum();
+        .filter(|s| s.kind == SegmentKind::Geometry as u16);
+    let geometry_bytes = geometry.clone().map(|s| s.length).sum();
     let stored: std::collections::BTreeMap<u32, u64> = h
         .objects
         .iter()
@@ -164,6 +168,11 @@ pub fn stats(db: &Database) -> DbStats {
         segments: db.segments().len() as u64,
         geometry_bytes,
         triangles_stored: stored.values().sum(),
+        compressed_segments: geometry
+            .clone()
+            .filter(|s| s.flags & segment_flags::MESHOPT != 0)
+            .count() as u64,
+        geometry_decoded_bytes: geometry.map(|s| s.raw_length).sum(),
         file_bytes: db.file_len(),
         bounds: [h.bounds.min, h.bounds.max],
         origin: h.origin,
@@ -195,7 +204,7 @@ impl DbStats {
     /// A human-readable summary with the LOD table laid out like Funkhouser's Table 3.1.
     pub fn to_text(&self) -> String {
         let mut s = format!(
-            "{} (format v{}{})\n  objects {}  instances {}  occluders {}  materials {}\n  triangles: highest LOD {}  all LODs {}\n  segments {}  geometry {:.1} MB ({:.1} B per stored triangle)  file {:.1} MB\n",
+            "{} (format v{}{})\n  objects {}  instances {}  occluders {}  materials {}\n  triangles: highest LOD {}  all LODs {}\n  segments {}  geometry {:.1} MB ({:.1} B per stored triangle{})  file {:.1} MB\n",
             self.name,
             self.format_version,
             if self.flattened { ", flattened" } else { "" },
@@ -208,6 +217,15 @@ impl DbStats {
             self.segments,
             self.geometry_bytes as f64 / 1e6,
             self.geometry_bytes as f64 / self.triangles_stored.max(1) as f64,
+            if self.compressed_segments > 0 {
+                format!(
+                    "; {} segments meshopt-compressed, {:.1} MB decoded",
+                    self.compressed_segments,
+                    self.geometry_decoded_bytes as f64 / 1e6
+                )
+            } else {
+                String::new()
+            },
             self.file_bytes as f64 / 1e6,
         );
         let [lo, hi] = self.bounds;

@@ -85,6 +85,18 @@ fn every_lod_decodes_to_the_same_mesh_in_fewer_bytes() {
     // The wire cost: bytes per stored triangle over all LODs (the plain layout is ~45).
     let (sa, sb) = (stats(&a), stats(&b));
     assert_eq!(sa.triangles_stored, sb.triangles_stored);
+    // The segment index says which segments are compressed and what they decode to: exactly
+    // the plain file's bytes.
+    let flagged = b
+        .segments()
+        .iter()
+        .filter(|e| e.flags & portico_data::format::segment_flags::MESHOPT != 0)
+        .count() as u64;
+    assert!(flagged > 100 && flagged == sb.compressed_segments);
+    assert_eq!(sa.compressed_segments, 0);
+    assert_eq!(sa.geometry_decoded_bytes, sa.geometry_bytes);
+    assert_eq!(sb.geometry_decoded_bytes, sa.geometry_bytes);
+    assert!(sb.to_text().contains("meshopt-compressed"));
     let per =
         |s: &portico_data::stats::DbStats| s.geometry_bytes as f64 / s.triangles_stored as f64;
     println!(

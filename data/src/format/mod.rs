@@ -71,8 +71,12 @@ impl SegmentKind {
 pub mod segment_flags {
     /// The payload is zstd-compressed (reserved: not written yet; readers reject it).
     pub const ZSTD: u16 = 1;
+    /// A geometry segment quantised and meshopt-encoded (`codec`); its `raw_length` is the
+    /// size it decodes to. Readers from before compression refuse the file by this flag,
+    /// with a clear message, rather than misreading the segment.
+    pub const MESHOPT: u16 = 2;
     /// Every flag this build understands.
-    pub const KNOWN: u16 = 0;
+    pub const KNOWN: u16 = MESHOPT;
 }
 
 /// The fixed prologue at offset 0.

@@ -64,15 +64,26 @@ impl DbWriter {
 
     /// Appends a segment and returns its id.
     pub fn add_segment(&mut self, kind: SegmentKind, bytes: &[u8]) -> Result<u32> {
+        self.add_segment_flagged(kind, bytes, 0, bytes.len() as u64)
+    }
+
+    /// Appends a segment with [`super::segment_flags`] and the length it decodes to.
+    pub fn add_segment_flagged(
+        &mut self,
+        kind: SegmentKind,
+        bytes: &[u8],
+        flags: u16,
+        raw_length: u64,
+    ) -> Result<u32> {
         self.pad_to(alignment_for(bytes.len() as u64))?;
         let id = self.entries.len() as u32;
         self.entries.push(SegmentEntry {
             id,
             kind: kind as u16,
-            flags: 0,
+            flags,
             offset: self.pos,
             length: bytes.len() as u64,
-            raw_length: bytes.len() as u64,
+            raw_length,
             checksum: checksum(bytes),
             reserved: 0,
         });
