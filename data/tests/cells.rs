@@ -18,6 +18,8 @@ use portico_data::import::import_file;
 use proptest::prelude::*;
 use std::sync::OnceLock;
 
+mod common;
+
 fn bx(min: [f32; 3], max: [f32; 3]) -> Aabb {
     Aabb { min, max }
 }
@@ -346,15 +348,8 @@ type Built = (CellGraph, Vec<StabList>, Vec<Aabb>, Vec<Aabb>, Triangles);
 fn tiny() -> &'static Built {
     static DB: OnceLock<Built> = OnceLock::new();
     DB.get_or_init(|| {
-        let params = portico_generator::Params {
-            preset: portico_generator::Preset::Tiny,
-            seed: 3,
-            floors: Some(2),
-        };
-        let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
         let dir = tempfile::tempdir().unwrap();
-        let glb = dir.path().join("tiny.glb");
-        std::fs::write(&glb, &b.glb).unwrap();
+        let glb = common::tiny_glb(dir.path(), 3, 2);
         let out = dir.path().join("tiny.portico");
         build(
             import_file(&glb).unwrap(),

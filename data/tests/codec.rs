@@ -10,18 +10,13 @@ use portico_data::import::import_file;
 use portico_data::stats::stats;
 use std::path::PathBuf;
 
+mod common;
+
 /// The tiny generated building, built plain and compressed (flattened: every instance's own
 /// world-space geometry, the case where bytes matter most).
 fn both() -> (tempfile::TempDir, PathBuf, PathBuf) {
-    let params = portico_generator::Params {
-        preset: portico_generator::Preset::Tiny,
-        seed: 5,
-        floors: Some(1),
-    };
-    let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
     let dir = tempfile::tempdir().unwrap();
-    let glb = dir.path().join("tiny.glb");
-    std::fs::write(&glb, &b.glb).unwrap();
+    let glb = common::tiny_glb(dir.path(), 5, 1);
     let out = |name: &str, compress: bool| {
         let path = dir.path().join(name);
         let opts = BuildOptions {

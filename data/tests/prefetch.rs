@@ -11,6 +11,8 @@ use portico_protocol::{Granularity, LookaheadCull, NeedKind, Observer, Policy, R
 use std::collections::HashSet;
 use std::sync::{Arc, OnceLock};
 
+mod common;
+
 fn prefetcher(no_cells: bool) -> &'static Prefetcher {
     static WITH: OnceLock<Prefetcher> = OnceLock::new();
     static WITHOUT: OnceLock<Prefetcher> = OnceLock::new();
@@ -36,15 +38,8 @@ fn tiny_with(
     opts: &BuildOptions,
     painter: Option<&mut dyn portico_data::hierarchy::ImpostorPainter>,
 ) -> Prefetcher {
-    let params = portico_generator::Params {
-        preset: portico_generator::Preset::Tiny,
-        seed: 5,
-        floors: Some(2),
-    };
-    let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
     let dir = tempfile::tempdir().unwrap();
-    let glb = dir.path().join("tiny.glb");
-    std::fs::write(&glb, &b.glb).unwrap();
+    let glb = common::tiny_glb(dir.path(), 5, 2);
     let out = dir.path().join("tiny.portico");
     portico_data::build::build_with(import_file(&glb).unwrap(), &out, opts, &Quiet, painter)
         .unwrap();
@@ -821,13 +816,7 @@ fn the_lookahead_stops_at_the_cache_size_but_keeps_the_view() {
         for obs in observers(prefetcher(false)) {
             let mut sizes = Vec::new();
             for cache in [1u64, 64 << 10, 1 << 20, 1 << 30] {
-                let policy = Policy {
-                    cache_bytes: cache,
-                    read_bytes: 1 << 30,
-                    range_cull: RangeCull::Any,
-                    depth_frames: 64,
-                    ..Policy::default()
-                };
+                let policy = cache_bound(cache);
                 let r = p.answer(&obs, &policy, &HashSet::new()).unwrap();
                 assert!(
                     r.items.iter().any(|i| i.kind == NeedKind::Geometry),
@@ -857,6 +846,17 @@ fn the_lookahead_stops_at_the_cache_size_but_keeps_the_view() {
     }
 }
 
+/// A policy whose lookahead only the cache stops: any range, 64 frames deep, no read cap.
+fn cache_bound(cache: u64) -> Policy {
+    Policy {
+        cache_bytes: cache,
+        read_bytes: 1 << 30,
+        range_cull: RangeCull::Any,
+        depth_frames: 64,
+        ..Policy::default()
+    }
+}
+
 /// The lookahead claims what segments occupy decoded: a compressed database reads ahead exactly
 /// what the plain one does (its segments weigh a third on the wire, but not in the cache).
 #[test]
@@ -871,13 +871,7 @@ fn compression_does_not_stretch_the_lookahead_past_the_cache() {
     for obs in observers(plain) {
         let mut sizes = Vec::new();
         for cache in [64u64 << 10, 1 << 20] {
-            let policy = Policy {
-                cache_bytes: cache,
-                read_bytes: 1 << 30,
-                range_cull: RangeCull::Any,
-                depth_frames: 64,
-                ..Policy::default()
-            };
+            let policy = cache_bound(cache);
             let ids = |p: &Prefetcher| -> Vec<u32> {
                 let r = p.answer(&obs, &policy, &HashSet::new()).unwrap();
                 let mut v: Vec<u32> = r.items.iter().map(|i| i.segment).collect();
