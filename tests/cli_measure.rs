@@ -119,6 +119,43 @@ fn loadtest_stress_and_bench_run_from_the_command_line() {
         assert_eq!(l["errors"], 0, "{l}");
     }
 
+    // The push transport under a crowd, measured from the server's /metrics: one place's list
+    // serves every observer in it, so four walkers compute far fewer lists than they send
+    // updates (each session changes lists only when it changes place), and the server's CPU
+    // per update is measured, not zero.
+    let ss = dir.path().join("stream-stress");
+    let said = ok(&[
+        "loadtest",
+        "--server",
+        &server.1,
+        "--path-kind",
+        "tour",
+        "--stress",
+        "1,4",
+        "--stream",
+        "--stress-seconds",
+        "1",
+        "--link",
+        "rtt=0ms,rate=1mbit",
+        "-o",
+        s(&ss),
+    ]);
+    let stress = json(&ss.join("stress.json"));
+    assert_eq!(stress["transport"], "stream");
+    let levels = stress["levels"].as_array().expect("levels");
+    assert_eq!(levels.len(), 2, "{said}");
+    for (l, clients) in levels.iter().zip([1u64, 4]) {
+        assert_eq!(l["connected"], clients, "{l}");
+        let updates = l["updates"].as_u64().unwrap();
+        // 20 updates per second per client, give or take the window's edges.
+        assert!(updates >= 15 * clients, "{l}");
+        assert!(l["lists_taken"].as_u64().unwrap() < updates / 2, "{l}");
+        assert!(l["lists_computed"].as_u64().unwrap() <= l["lists_taken"].as_u64().unwrap());
+        assert!(l["server_cpu_s"].as_f64().unwrap() > 0.0, "{l}");
+        assert!(l["ping_s"]["max"].as_f64().unwrap() > 0.0, "{l}");
+    }
+    assert!(ss.join("scaling.png").is_file());
+
     let b = dir.path().join("bench");
     ok(&[
         "bench",

@@ -2,14 +2,12 @@
 //! visible now, respects its budget and order, and the range behaves as the policies say.
 
 use glam::Vec3;
-use portico_data::Database;
-use portico_data::build::{BuildOptions, Quiet};
+use portico_data::build::BuildOptions;
 use portico_data::cells::realtime::{Frustum, eye_to_cell, eye_to_object};
-use portico_data::import::import_file;
 use portico_data::prefetch::Prefetcher;
 use portico_protocol::{Granularity, LookaheadCull, NeedKind, Observer, Policy, RangeCull};
 use std::collections::HashSet;
-use std::sync::{Arc, OnceLock};
+use std::sync::OnceLock;
 
 mod common;
 
@@ -38,14 +36,7 @@ fn tiny_with(
     opts: &BuildOptions,
     painter: Option<&mut dyn portico_data::hierarchy::ImpostorPainter>,
 ) -> Prefetcher {
-    let dir = tempfile::tempdir().unwrap();
-    let glb = common::tiny_glb(dir.path(), 5, 2);
-    let out = dir.path().join("tiny.portico");
-    portico_data::build::build_with(import_file(&glb).unwrap(), &out, opts, &Quiet, painter)
-        .unwrap();
-    // The map stays valid after the directory is removed (the inode lives on).
-    let db = Arc::new(Database::open(&out).unwrap());
-    Prefetcher::new(db).unwrap()
+    common::tiny_prefetcher(opts, painter)
 }
 
 /// Observers standing in the middle of live cells, looking along +x, -x, +z.

@@ -33,6 +33,10 @@ pub struct Config {
     /// Time a client has to send a request's headers (and an idle keep-alive connection to
     /// start its next request) before the connection is closed.
     pub header_timeout: Duration,
+    /// Stream sessions share one need list per eye cell and direction bucket and recompute only
+    /// when the observer leaves them (`portico_data::prefetch::shared`); off, every observer
+    /// gets its own list, computed for it (exact; the baseline of the stress figures).
+    pub shared_answers: bool,
     /// How long requests in flight may finish after a stop or reload before their connections
     /// are closed.
     pub drain: Duration,
@@ -54,6 +58,7 @@ impl Default for Config {
             max_connections: crate::listen::default_max_connections(),
             header_timeout: Duration::from_secs(10),
             drain: Duration::from_secs(10),
+            shared_answers: true,
         }
     }
 }

@@ -16,6 +16,7 @@ pub mod error;
 pub mod guard;
 pub mod listen;
 pub mod metrics;
+pub mod process;
 pub mod routes;
 pub mod state;
 pub mod stream;

@@ -41,6 +41,13 @@ pub struct Metrics {
     pub stream_dropped: AtomicU64,
     /// Prefetch answers computed (HTTP and stream).
     pub prefetch_answers: AtomicU64,
+    /// Observers received on stream sessions.
+    pub stream_updates: AtomicU64,
+    /// Stream updates by seconds from arrival to the need list in place (0 when the observer
+    /// stayed in its place), bucketed by [`BUCKETS`].
+    update_buckets: [AtomicU64; BUCKETS.len()],
+    update_sum_us: AtomicU64,
+    update_count: AtomicU64,
     /// Connections over the cap, answered 503 and closed.
     pub refused_connections: AtomicU64,
     /// Connections closed at the cap to make room: the oldest that had not sent a request.
@@ -66,6 +73,16 @@ impl Metrics {
             r.latency_buckets[b].fetch_add(1, Relaxed);
         }
         r.latency_sum_us.fetch_add((seconds * 1e6) as u64, Relaxed);
+    }
+
+    /// Records one stream update's latency (arrival to need list in place).
+    pub fn update(&self, seconds: f64) {
+        if let Some(b) = BUCKETS.iter().position(|&ub| seconds <= ub) {
+            self.update_buckets[b].fetch_add(1, Relaxed);
+        }
+        self.update_sum_us
+            .fetch_add((seconds * 1e6) as u64, Relaxed);
+        self.update_count.fetch_add(1, Relaxed);
     }
 
     /// Counts bytes of one segment sent.
@@ -131,7 +148,31 @@ impl Metrics {
             let _ = writeln!(s, "portico_request_seconds_sum{{route=\"{name}\"}} {sum}");
             let _ = writeln!(s, "portico_request_seconds_count{{route=\"{name}\"}} {n}");
         }
-        let gauges: [(&str, &str, &str, i64); 8] = [
+        let _ = writeln!(
+            s,
+            "# HELP portico_stream_update_seconds Stream observer to need list in place."
+        );
+        let _ = writeln!(s, "# TYPE portico_stream_update_seconds histogram");
+        let mut cum = 0;
+        for (ub, b) in BUCKETS.iter().zip(&self.update_buckets) {
+            cum += b.load(Relaxed);
+            let _ = writeln!(
+                s,
+                "portico_stream_update_seconds_bucket{{le=\"{ub}\"}} {cum}"
+            );
+        }
+        let n = self.update_count.load(Relaxed);
+        let _ = writeln!(s, "portico_stream_update_seconds_bucket{{le=\"+Inf\"}} {n}");
+        let sum = self.update_sum_us.load(Relaxed) as f64 / 1e6;
+        let _ = writeln!(s, "portico_stream_update_seconds_sum {sum}");
+        let _ = writeln!(s, "portico_stream_update_seconds_count {n}");
+        let gauges: [(&str, &str, &str, i64); 9] = [
+            (
+                "portico_stream_updates_total",
+                "counter",
+                "Observers received on stream sessions (a newer one may replace one waiting).",
+                self.stream_updates.load(Relaxed) as i64,
+            ),
             (
                 "portico_bytes_sent_total",
                 "counter",

@@ -38,10 +38,9 @@ pub async fn healthz(State(s): Shared) -> impl IntoResponse {
 
 /// `GET /metrics` (Prometheus text).
 pub async fn metrics(State(s): Shared) -> impl IntoResponse {
-    (
-        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
-        s.metrics.render(),
-    )
+    let mut text = s.metrics.render();
+    crate::process::render(&mut text, s.prefetcher.shared_answers());
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text)
 }
 
 /// Whether the client asked for bincode: an `Accept` naming bincode or JSON decides; otherwise

@@ -1,8 +1,15 @@
 //! `GET /v1/stream`: a WebSocket session per client. The client sends its observer every frame;
-//! the server recomputes the lookahead (Funkhouser §5.2) against a mirror of what it already
-//! sent, pushes segments in need order paced to the session's byte rate, tells the client which
-//! queued items it dropped because their need vanished, and forgets segments the client reports
-//! evicted. No round trip per frame is needed.
+//! the server pushes the segments of the observer's need list (Funkhouser §5.2) that a mirror of
+//! what it already sent lacks, in need order, paced to the session's byte rate; tells the client
+//! which queued items it dropped because their need vanished; and forgets segments the client
+//! reports evicted. No round trip per frame is needed.
+//!
+//! Answers are shared and incremental: the need list depends only on the eye cell and a
+//! direction bucket (`portico_data::prefetch::shared`), so an observer that stays in its cell
+//! and bucket costs a k-D descent and nothing else, a new place whose list some session already
+//! computed costs a cache lookup, and only a new place nobody has asked for is computed. What
+//! is left to push is the list past a cursor, minus the mirror: no per-session copy of it.
+//! A database without cells falls back to one computation per observer.
 //!
 //! A session cannot take more than its share: observers are coalesced (only the latest one is
 //! computed, on a compute slot within the prefetch deadline, never on the async workers, so a
@@ -18,11 +25,12 @@ use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use futures_util::{SinkExt, StreamExt};
+use portico_data::prefetch::NeedList;
+use portico_data::prefetch::shared::{ShareKey, SharePlace, encode_policy};
 use portico_protocol::{
-    FRAME_CONTROL, NeedItem, Observer, PROTOCOL_VERSION, Policy, PrefetchResponse, StreamClient,
-    StreamServer, segment_frame,
+    FRAME_CONTROL, Observer, PROTOCOL_VERSION, Policy, StreamClient, StreamServer, segment_frame,
 };
-use std::collections::{HashSet, VecDeque};
+use std::collections::HashSet;
 use std::future::Future;
 use std::pin::Pin;
 use std::sync::Arc;
@@ -39,7 +47,11 @@ pub async fn upgrade(State(s): State<Arc<AppState>>, ws: WebSocketUpgrade) -> Re
         )
         .into_response();
     };
+    // Clients send small messages: a 128 KiB read buffer per session (tungstenite's default)
+    // would be most of a session's memory. Frames are written as they come, not batched.
     ws.max_message_size(s.config.max_body_bytes)
+        .read_buffer_size(4 << 10)
+        .write_buffer_size(0)
         .on_upgrade(move |socket| async move {
             s.metrics.sessions.fetch_add(1, Relaxed);
             s.metrics.sessions_total.fetch_add(1, Relaxed);
@@ -49,33 +61,47 @@ pub async fn upgrade(State(s): State<Arc<AppState>>, ws: WebSocketUpgrade) -> Re
         })
 }
 
-/// A prefetch answer being computed for the session.
-type Computing = Pin<Box<dyn Future<Output = Result<PrefetchResponse, Error>> + Send>>;
+/// A need list being computed for the session.
+type Computing = Pin<Box<dyn Future<Output = Result<Arc<NeedList>, Error>> + Send>>;
+
+/// An observer waiting for its need list: the observer, its place (`None` without cells) and
+/// when it arrived.
+type Pending = (Observer, Option<SharePlace>, Instant);
 
 /// One client's session state.
 struct Session {
     state: Arc<AppState>,
     policy: Policy,
+    /// The policy's bytes, the shared lists' key part that stays for the session.
+    policy_bytes: Arc<[u8]>,
     rate: u64,
     /// Segments the client holds (sent and not evicted).
     mirror: HashSet<u32>,
-    /// Items waiting to be pushed, in need order.
-    queue: VecDeque<NeedItem>,
+    /// The need list being pushed.
+    list: Arc<NeedList>,
+    /// Items of `list` before this are pushed, held or skipped.
+    cursor: usize,
+    /// The place `list` was made for (`None`: for one observer, or nothing yet).
+    place: Option<SharePlace>,
     /// When the paced link is free for the next push.
     next_free: Instant,
-    /// The latest observer not yet computed (older ones are dropped: only the latest matters).
-    pending: Option<Observer>,
+    /// The latest observer not yet served (older ones are dropped: only the latest matters).
+    pending: Option<Pending>,
 }
 
 impl Session {
     fn new(state: Arc<AppState>) -> Session {
         let rate = state.config.max_session_rate;
+        let policy = Policy::default();
         Session {
             state,
-            policy: Policy::default(),
+            policy_bytes: encode_policy(&policy),
+            policy,
             rate,
             mirror: HashSet::new(),
-            queue: VecDeque::new(),
+            list: Arc::new(NeedList::default()),
+            cursor: 0,
+            place: None,
             next_free: Instant::now(),
             pending: None,
         }
@@ -90,14 +116,14 @@ impl Session {
         let idle = self.state.config.idle_timeout;
         let write_timeout = self.state.config.write_timeout;
         let mut idle_deadline = Instant::now() + idle;
-        let mut computing: Option<Computing> = None;
+        let mut computing: Option<(Computing, Option<SharePlace>, Instant)> = None;
         loop {
             if computing.is_none()
-                && let Some(obs) = self.pending.take()
+                && let Some((obs, place, arrived)) = self.pending.take()
             {
-                computing = Some(self.compute(obs));
+                computing = Some((self.compute(obs, place), place, arrived));
             }
-            let push_at = (!self.queue.is_empty()).then_some(self.next_free);
+            let push_at = (self.cursor < self.list.items.len()).then_some(self.next_free);
             let outgoing = tokio::select! {
                 msg = rx.next() => {
                     let Some(Ok(msg)) = msg else { break };
@@ -107,9 +133,9 @@ impl Session {
                         Err(()) => break,
                     }
                 }
-                done = async { computing.as_mut().expect("guarded").await }, if computing.is_some() => {
-                    computing = None;
-                    self.on_answer(done)
+                done = async { computing.as_mut().expect("guarded").0.as_mut().await }, if computing.is_some() => {
+                    let (_, place, arrived) = computing.take().expect("guarded");
+                    self.on_list(done, place, arrived)
                 }
                 _ = sleep_until(push_at.unwrap_or(idle_deadline)), if push_at.is_some() => {
                     self.next_push()
@@ -131,18 +157,23 @@ impl Session {
             tokio::time::timeout(Duration::from_millis(100), tx.send(Message::Close(None))).await;
     }
 
-    /// Starts computing the need list for `obs` against a snapshot of the mirror.
-    fn compute(&self, obs: Observer) -> Computing {
+    /// Starts computing the need list for `obs`: the shared list of its place, or (without
+    /// cells) its own.
+    fn compute(&self, obs: Observer, place: Option<SharePlace>) -> Computing {
         let state = self.state.clone();
-        let (policy, held) = (self.policy, self.mirror.clone());
+        let policy = self.policy;
+        let key = place.map(|p| ShareKey::new(p, self.policy_bytes.clone()));
         Box::pin(async move {
             let s = state.clone();
             state
                 .compute
                 .run(move |budget| {
-                    s.prefetcher
-                        .answer_within(&obs, &policy, &held, &budget)
-                        .map_err(Error::from)
+                    let p = &s.prefetcher;
+                    match &key {
+                        Some(k) => p.shared_list(k, &obs, &policy, &budget),
+                        None => p.need_list_within(&obs, &policy, &budget).map(Arc::new),
+                    }
+                    .map_err(Error::from)
                 })
                 .await
         })
@@ -171,7 +202,11 @@ impl Session {
                 if let Err(e) = crate::routes::validate_policy(&policy) {
                     return error(e);
                 }
-                self.policy = policy;
+                if policy != self.policy {
+                    self.policy = policy;
+                    self.policy_bytes = encode_policy(&policy);
+                    self.place = None; // the next observer gets the new policy's list
+                }
                 self.rate = rate_bytes_per_s.clamp(1, self.state.config.max_session_rate);
                 Ok(None)
             }
@@ -179,12 +214,16 @@ impl Session {
                 if let Err(e) = crate::routes::validate_observer(&obs) {
                     return error(e);
                 }
-                self.pending = Some(obs);
-                Ok(None)
+                Ok(self.on_observer(obs))
             }
             Ok(StreamClient::Evicted(ids)) => {
+                let mut needed = false;
                 for id in ids {
                     self.mirror.remove(&id);
+                    needed |= self.list.segments.contains(&id);
+                }
+                if needed {
+                    self.cursor = 0; // push them again, in their place in the order
                 }
                 Ok(None)
             }
@@ -192,40 +231,74 @@ impl Session {
         }
     }
 
-    /// Takes a computed need list; reports queued items whose need vanished. A computation
-    /// stopped by its deadline keeps the previous list.
-    fn on_answer(&mut self, answer: Result<PrefetchResponse, Error>) -> Option<Message> {
-        let answer = match answer {
-            Ok(a) => a,
+    /// A new observer: nothing to do while it stays in its place; the cached list of a place
+    /// another session computed; otherwise a computation (only the latest observer waits).
+    fn on_observer(&mut self, obs: Observer) -> Option<Message> {
+        let arrived = Instant::now();
+        let m = &self.state.metrics;
+        m.stream_updates.fetch_add(1, Relaxed);
+        let place = if self.state.config.shared_answers {
+            self.state.prefetcher.share_place(&obs)
+        } else {
+            None
+        };
+        if place.is_some() && place == self.place {
+            self.pending = None;
+            m.update(0.0);
+            return None;
+        }
+        if let Some(p) = place {
+            let key = ShareKey::new(p, self.policy_bytes.clone());
+            if let Some(list) = self.state.prefetcher.shared_cached(&key) {
+                self.pending = None;
+                return self.on_list(Ok(list), place, arrived);
+            }
+        }
+        self.pending = Some((obs, place, arrived));
+        None
+    }
+
+    /// Takes a need list; reports queued items whose need vanished. A computation stopped by
+    /// its deadline keeps the previous list.
+    fn on_list(
+        &mut self,
+        list: Result<Arc<NeedList>, Error>,
+        place: Option<SharePlace>,
+        arrived: Instant,
+    ) -> Option<Message> {
+        let list = match list {
+            Ok(l) => l,
             Err(e) if e.status() == StatusCode::SERVICE_UNAVAILABLE => return None,
             Err(e) => return Some(control(&StreamServer::Error(e.to_api()))),
         };
-        self.state.metrics.prefetch_answers.fetch_add(1, Relaxed);
-        let now: HashSet<u32> = answer.items.iter().map(|i| i.segment).collect();
-        let dropped: Vec<u32> = self
-            .queue
+        let m = &self.state.metrics;
+        m.prefetch_answers.fetch_add(1, Relaxed);
+        m.update(arrived.elapsed().as_secs_f64());
+        let dropped: Vec<u32> = self.list.items[self.cursor.min(self.list.items.len())..]
             .iter()
             .map(|i| i.segment)
-            .filter(|s| !now.contains(s))
+            .filter(|s| !self.mirror.contains(s) && !list.segments.contains(s))
             .collect();
-        self.queue = answer.items.into();
+        self.list = list;
+        self.cursor = 0;
+        self.place = place;
         if dropped.is_empty() {
             return None;
         }
-        self.state
-            .metrics
-            .stream_dropped
-            .fetch_add(dropped.len() as u64, Relaxed);
+        m.stream_dropped.fetch_add(dropped.len() as u64, Relaxed);
         Some(control(&StreamServer::Dropped(dropped)))
     }
 
-    /// The next queued segment as a frame (or an error for a segment that cannot be read), and
-    /// the pacing clock advanced by its size.
+    /// The next segment of the list the client lacks, as a frame (or an error for a segment
+    /// that cannot be read), and the pacing clock advanced by its size.
     fn next_push(&mut self) -> Option<Message> {
-        let item = self.queue.pop_front()?;
-        if self.mirror.contains(&item.segment) {
-            return None;
-        }
+        let item = loop {
+            let item = *self.list.items.get(self.cursor)?;
+            self.cursor += 1;
+            if !self.mirror.contains(&item.segment) {
+                break item;
+            }
+        };
         let bytes = match self.state.db().segment(item.segment) {
             Ok(b) => b,
             Err(e) => return Some(control(&StreamServer::Error(Error::from(e).to_api()))),

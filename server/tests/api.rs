@@ -3,6 +3,7 @@
 
 use futures_util::{SinkExt, StreamExt};
 use portico_data::format::Header;
+use portico_data::prefetch::Budget;
 use portico_protocol::{
     ApiError, BINCODE_MIME, Manifest, PROTOCOL_VERSION, PrefetchResponse, ServerFrame,
     StreamClient, StreamServer,
@@ -401,10 +402,11 @@ async fn the_stream_pushes_needed_segments_and_survives_vanishing_clients() {
     }
     let db = s.state.db();
     let req = request(db);
-    let expected = s
-        .state
-        .prefetcher
-        .answer(&req.observer, &req.policy, &Default::default())
+    // The session pushes its place's shared need list (the eye cell and direction bucket's).
+    let p = &s.state.prefetcher;
+    let key = p.share_key(&req.observer, &req.policy).expect("cells");
+    let expected = p
+        .shared_list(&key, &req.observer, &req.policy, &Budget::unlimited())
         .unwrap();
     ws.send(binary(&StreamClient::Hello {
         version: PROTOCOL_VERSION,

@@ -1,14 +1,18 @@
 //! The WebSocket stream's promises, each with a deadline: pushes are paced to the session's byte
 //! rate, nothing the client holds is sent again (and an `Evicted` segment is), queued segments a
-//! new observer no longer needs are reported `Dropped` and never sent, and a silent client is
-//! closed after the idle timeout with a Close frame.
+//! new observer no longer needs are reported `Dropped` and never sent, an observer that stays in
+//! its cell and direction bucket costs no computation, and a silent client is closed after the
+//! idle timeout with a Close frame.
 
 use futures_util::{SinkExt, StreamExt};
+use portico_data::prefetch::{Budget, NeedList};
 use portico_protocol::{
     Observer, PROTOCOL_VERSION, Policy, ServerFrame, StreamClient, StreamServer,
 };
 use portico_server::Config;
+use portico_server::state::AppState;
 use std::collections::HashSet;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio_tungstenite::tungstenite::Message;
 
@@ -34,6 +38,16 @@ async fn hello(ws: &mut Ws, policy: Policy, rate: u64) {
         rate_bytes_per_s: rate,
     };
     ws.send(binary(&msg)).await.unwrap();
+}
+
+/// The need list a session pushes for `obs`: the shared list of its cell and direction bucket.
+fn need_list(state: &AppState, obs: &Observer, policy: &Policy) -> Arc<NeedList> {
+    let p = &state.prefetcher;
+    let key = p
+        .share_key(obs, policy)
+        .expect("the test building has cells");
+    p.shared_list(&key, obs, policy, &Budget::unlimited())
+        .unwrap()
 }
 
 /// What the server sends next, or `None` when nothing comes within `wait`.
@@ -83,11 +97,7 @@ async fn segments(ws: &mut Ws, want: usize) -> Vec<(u32, usize)> {
 async fn pushes_are_paced_to_the_sessions_byte_rate() {
     let s = start(Config::default()).await;
     let req = request(s.state.db());
-    let answer = s
-        .state
-        .prefetcher
-        .answer(&req.observer, &req.policy, &HashSet::new())
-        .unwrap();
+    let answer = need_list(&s.state, &req.observer, &req.policy);
     let total: u64 = answer.items.iter().map(|i| i.bytes).sum();
     assert!(total > 50_000, "too little to pace: {total} bytes");
     // A rate that takes 0.6 s for the whole answer, and one that is not a limit.
@@ -124,13 +134,7 @@ async fn pushes_are_paced_to_the_sessions_byte_rate() {
 async fn nothing_held_is_sent_again_and_an_evicted_segment_is() {
     let s = start(Config::default()).await;
     let req = request(s.state.db());
-    let n = s
-        .state
-        .prefetcher
-        .answer(&req.observer, &req.policy, &HashSet::new())
-        .unwrap()
-        .items
-        .len();
+    let n = need_list(&s.state, &req.observer, &req.policy).items.len();
     let mut ws = connect(&s.base).await;
     hello(&mut ws, req.policy, 1 << 30).await;
     let observe = binary(&StreamClient::Observer(req.observer));
@@ -178,10 +182,8 @@ async fn queued_segments_no_longer_needed_are_dropped_and_never_sent() {
         read_bytes: 1 << 30,
         ..req.policy
     };
-    let answer = |o: &Observer| -> HashSet<u32> {
-        let a = s.state.prefetcher.answer(o, &policy, &HashSet::new());
-        a.unwrap().items.iter().map(|i| i.segment).collect()
-    };
+    let answer =
+        |o: &Observer| -> HashSet<u32> { need_list(&s.state, o, &policy).segments.clone() };
     let (first, second) = (answer(&req.observer), answer(&there));
     assert!(
         first.difference(&second).count() > 2,
@@ -254,4 +256,57 @@ async fn a_silent_client_is_closed_after_the_idle_timeout() {
             panic!("closed although the client talks");
         }
     }
+}
+
+#[tokio::test]
+async fn an_observer_that_stays_in_its_cell_and_bucket_costs_no_computation() {
+    use std::sync::atomic::Ordering::Relaxed;
+    let s = start(Config::default()).await;
+    let req = request(s.state.db());
+    let p = &s.state.prefetcher;
+    let place = p.share_place(&req.observer).unwrap();
+    // Twenty observers a few centimetres apart, turning a little: one place.
+    let walk: Vec<Observer> = (0..20)
+        .map(|i| {
+            let mut o = req.observer;
+            o.eye[0] += 0.002 * i as f32;
+            o.dir[1] += 0.001 * i as f32;
+            o
+        })
+        .filter(|o| p.share_place(o) == Some(place))
+        .collect();
+    assert!(walk.len() >= 10, "the walk left its place at once");
+    let n = need_list(&s.state, &req.observer, &req.policy).items.len();
+    let misses = p.shared_answers().misses.load(Relaxed);
+    let answers = s.state.metrics.prefetch_answers.load(Relaxed);
+    let mut ws = connect(&s.base).await;
+    hello(&mut ws, req.policy, 1 << 30).await;
+    for o in &walk {
+        ws.send(binary(&StreamClient::Observer(*o))).await.unwrap();
+    }
+    let got = segments(&mut ws, n).await;
+    assert_eq!(got.len(), n);
+    let quiet = next(&mut ws, Duration::from_millis(300)).await;
+    assert!(quiet.is_none(), "more than the list: {quiet:?}");
+    // The list was computed once (above, by need_list) and taken from the cache once; the
+    // other observers changed nothing.
+    assert_eq!(p.shared_answers().misses.load(Relaxed), misses);
+    assert_eq!(s.state.metrics.prefetch_answers.load(Relaxed), answers + 1);
+    assert_eq!(
+        s.state.metrics.stream_updates.load(Relaxed),
+        walk.len() as u64
+    );
+    let text = reqwest::get(format!("{}/metrics", s.base))
+        .await
+        .unwrap()
+        .text()
+        .await
+        .unwrap();
+    let count = text
+        .lines()
+        .find_map(|l| l.strip_prefix("portico_stream_update_seconds_count "))
+        .unwrap();
+    assert_eq!(count, walk.len().to_string());
+    assert!(text.contains("process_cpu_seconds_total "), "{text}");
+    assert!(text.contains("portico_shared_hits_total 1\n"), "{text}");
 }

@@ -9,6 +9,7 @@ use crate::progress::Bars;
 use anyhow::{Context, Result};
 use portico_client::policy::{parse_policy, policy_spec};
 use portico_lab::loadtest::stress::{StressConfig, level};
+use portico_lab::loadtest::stress_stream::{self, StreamStressConfig};
 use portico_lab::loadtest::{Link, LoadtestConfig, LoadtestSummary, grid, run as run_loadtest};
 use portico_protocol::Policy;
 use std::path::PathBuf;
@@ -71,6 +72,12 @@ pub struct Args {
     /// Stress clients post back to back instead of once per frame (the server's throughput).
     #[arg(long)]
     closed_loop: bool,
+    /// Stress the push transport instead: each client holds a /v1/stream session and sends its
+    /// observer every frame, pushed to at --link's rate; the server's CPU per update, update
+    /// latency and memory per session come from its /metrics. Writes DIR/stress.json and
+    /// DIR/scaling.png.
+    #[arg(long, requires = "stress")]
+    stream: bool,
 }
 
 /// The policies to run: one from `--policy`, or the `--sweep` grid on top of it.
@@ -92,6 +99,15 @@ pub fn run(a: Args) -> Result<()> {
         anyhow::bail!("--budget-ms must be 1..=10000, not {}", a.budget_ms);
     }
     let path = crate::cmd::walk::load_path(&a.server, a.token.clone(), &a.route)?;
+    if a.stream {
+        // An unlimited link: the server's own cap on each session's rate.
+        let rate = if link.rate_bytes_per_s.is_finite() {
+            link.rate_bytes_per_s as u64
+        } else {
+            u64::MAX
+        };
+        return stress_stream(&a, path, policies[0].1, rate);
+    }
     if !a.stress.is_empty() {
         return stress(&a, path, policies[0].1);
     }
@@ -246,4 +262,87 @@ pub fn print_summary(s: &LoadtestSummary, out: &std::path::Path) {
         println!("  {v}");
     }
     println!("  report: {}", out.join("report.md").display());
+}
+
+/// `--stress N,… --stream`: the push transport per level of concurrency, measured from the
+/// server's own /metrics; a table, DIR/stress.json and DIR/scaling.png.
+fn stress_stream(
+    a: &Args,
+    path: portico_data::path::CameraPath,
+    policy: Policy,
+    rate: u64,
+) -> Result<()> {
+    let cfg = StreamStressConfig {
+        server: a.server.clone(),
+        token: a.token.clone(),
+        path,
+        policy,
+        frame_s: a.budget_ms / 1e3,
+        rate_bytes_per_s: rate,
+        duration: std::time::Duration::from_secs_f64(a.stress_seconds.clamp(0.1, 3600.0)),
+    };
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?;
+    println!(
+        "stream stress against {}: one observer per {} ms per session, pushes at {:.2} MB/s per \
+         session, {} s measured per level (server figures from its /metrics)",
+        a.server,
+        a.budget_ms,
+        rate as f64 / 1e6,
+        a.stress_seconds
+    );
+    println!(
+        "  {:>7} {:>7} {:>9} {:>12} {:>7} {:>11} {:>11} {:>11} {:>16} {:>9} {:>8}",
+        "clients",
+        "refused",
+        "updates/s",
+        "CPU/upd µs",
+        "cores",
+        "upd p50 ms",
+        "upd p99 ms",
+        "ping p99 ms",
+        "lists taken/made",
+        "KB/sess",
+        "MB/s out"
+    );
+    let mut levels: Vec<stress_stream::StreamLevel> = Vec::new();
+    for &n in &a.stress {
+        let l = rt.block_on(stress_stream::level(&cfg, n.max(1)))?;
+        let memory = stress_stream::memory_per_session(&[levels.clone(), vec![l.clone()]].concat());
+        println!(
+            "  {:>7} {:>7} {:>9.0} {:>12.1} {:>7.2} {:>11.3} {:>11.3} {:>11.2} {:>16} {:>9.1} {:>8.2}",
+            l.clients,
+            l.refused,
+            l.updates_per_s,
+            l.cpu_per_update_ms * 1e3,
+            l.server_cores,
+            l.update_p50_s * 1e3,
+            l.update_p99_s * 1e3,
+            l.ping_s.p99 * 1e3,
+            format!("{}/{}", l.lists_taken, l.lists_computed),
+            memory.last().copied().unwrap_or(0.0) / 1e3,
+            l.pushed_bytes as f64 / 1e6 / a.stress_seconds.max(1e-9)
+        );
+        levels.push(l);
+    }
+    std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
+    let json = serde_json::json!({
+        "server": a.server,
+        "transport": "stream",
+        "frame_ms": a.budget_ms,
+        "rate_bytes_per_s": rate,
+        "seconds_per_level": a.stress_seconds,
+        "policy": policy_spec(&policy),
+        "cores": std::thread::available_parallelism().map_or(1, |n| n.get()),
+        "levels": levels,
+        "memory_per_session_bytes": stress_stream::memory_per_session(&levels),
+    });
+    let out = a.out.join("stress.json");
+    std::fs::write(&out, serde_json::to_vec_pretty(&json)?)
+        .with_context(|| format!("writing {}", out.display()))?;
+    let plot = a.out.join("scaling.png");
+    portico_lab::loadtest::stress_plot::scaling(&plot, &levels)?;
+    println!("  wrote {} and {}", out.display(), plot.display());
+    Ok(())
 }

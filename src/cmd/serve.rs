@@ -41,6 +41,10 @@ pub struct Args {
     /// Deadline of one prefetch answer, milliseconds (past it the request gets a 503).
     #[arg(long, default_value_t = 250)]
     prefetch_deadline_ms: u64,
+    /// Compute each stream observer's own need list instead of sharing one per cell and
+    /// direction bucket (the baseline the shared answers are measured against; exact, costly).
+    #[arg(long)]
+    exact_answers: bool,
     /// After SIGTERM or SIGHUP, seconds the requests in flight have to finish before their
     /// connections are closed.
     #[arg(long, default_value_t = 10)]
@@ -57,6 +61,7 @@ pub fn run(a: Args) -> Result<()> {
         request_timeout: Duration::from_secs(a.timeout.max(1)),
         compute_deadline: Duration::from_millis(a.prefetch_deadline_ms.max(1)),
         drain: Duration::from_secs(a.drain_secs),
+        shared_answers: !a.exact_answers,
         ..Config::default()
     };
     let state = AppState::open(&a.file, config.clone())?;

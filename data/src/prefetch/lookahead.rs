@@ -60,13 +60,13 @@ impl Prefetcher {
         &self,
         graph: &CellGraph,
         range: &ObserverRange,
-        obs: &Observer,
+        now: &HashSet<u32>,
+        half_fov_y: f32,
         policy: &Policy,
         budget: &Budget,
     ) -> Result<(u32, Vec<NeedItem>, Vec<Candidate>, u32)> {
         let ranged = range::range_cells(graph, range, policy.range_cull);
         budget.check()?;
-        let now = self.visible_now(graph, obs)?;
         let mut stab_items = Vec::new();
         let mut seen_obj = vec![false; self.db.header().instances.len()];
         let mut seen_cell = vec![false; graph.cells.len()];
@@ -104,7 +104,7 @@ impl Prefetcher {
                         continue;
                     }
                     let first = cands.len();
-                    claimed += self.add_object(o, frames, range, obs, policy, &mut cands);
+                    claimed += self.add_object(o, frames, range, half_fov_y, policy, &mut cands);
                     if now.contains(&o) {
                         cands[first..].iter_mut().for_each(|c| c.now = true);
                     }
@@ -116,7 +116,7 @@ impl Prefetcher {
             }
         }
         let stab_items = if policy.impostors {
-            self.with_textures(stab_items, &cands, glam::Vec3::from(obs.eye))
+            self.with_textures(stab_items, &cands, range.eye)
         } else {
             stab_items
         };
@@ -126,7 +126,7 @@ impl Prefetcher {
     /// The objects in the observer's view right now: eye-to-object visibility from the eye
     /// cell's stab list through the portals (§4.1.2), as the client culls. Empty outside every
     /// live cell.
-    fn visible_now(&self, graph: &CellGraph, obs: &Observer) -> Result<HashSet<u32>> {
+    pub(super) fn visible_now(&self, graph: &CellGraph, obs: &Observer) -> Result<HashSet<u32>> {
         let eye = glam::Vec3::from(obs.eye);
         let Some(cell) = graph.locate(eye).filter(|&c| graph.cells[c as usize].live) else {
             return Ok(HashSet::new());
@@ -182,7 +182,8 @@ impl Prefetcher {
             if frames > 0 && claimed > policy.cache_bytes {
                 break;
             }
-            claimed += self.add_object(o, frames.min(range.depth), range, obs, policy, &mut cands);
+            let frames = frames.min(range.depth);
+            claimed += self.add_object(o, frames, range, obs.half_fov_y, policy, &mut cands);
         }
         Ok(cands)
     }
@@ -194,7 +195,7 @@ impl Prefetcher {
         o: u32,
         frames: u32,
         range: &ObserverRange,
-        obs: &Observer,
+        half_fov_y: f32,
         policy: &Policy,
         cands: &mut Vec<Candidate>,
     ) -> u64 {
@@ -203,7 +204,7 @@ impl Prefetcher {
             return 0;
         };
         let lods = header.lods_of(inst);
-        let max = max_lod_in_range(lods, &inst.bounds, range, policy, obs.half_fov_y);
+        let max = max_lod_in_range(lods, &inst.bounds, range, policy, half_fov_y);
         let mut bytes = 0;
         for (i, l) in lods.iter().enumerate().skip(max) {
             let b = self.segment_bytes(l.segment);

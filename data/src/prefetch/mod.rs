@@ -3,6 +3,7 @@
 //!
 //! - [`range`]: the observer range and the range cells (§5.2.1, Dijkstra in frames-to-enter).
 //! - [`lookahead`]: the lookahead objects and each one's maximum LOD (§5.2.2).
+//! - [`shared`]: one need list for every observer in a cell looking the same way, cached.
 //! - this module: the read set — stab lists of the range cells first, then the geometry of what
 //!   the observer sees right now, then the rest, each ordered by LOD (coarsest first) and by
 //!   when it can become visible, cut at the read budget but never before the coarsest LOD of
@@ -13,6 +14,7 @@
 
 pub mod lookahead;
 pub mod range;
+pub mod shared;
 
 use crate::Database;
 use crate::cells::{CellGraph, StabList};
@@ -76,6 +78,7 @@ pub struct Prefetcher {
     graph: Option<CellGraph>,
     stabs: Vec<OnceLock<Arc<StabList>>>,
     bounds: Vec<Aabb>,
+    shared: shared::SharedAnswers,
 }
 
 impl std::fmt::Debug for Prefetcher {
@@ -108,6 +111,7 @@ impl Prefetcher {
             graph,
             stabs: (0..n).map(|_| OnceLock::new()).collect(),
             bounds,
+            shared: shared::SharedAnswers::new(shared::DEFAULT_CACHE_BYTES),
         })
     }
 
@@ -166,9 +170,27 @@ impl Prefetcher {
         budget: &Budget,
     ) -> Result<PrefetchResponse> {
         let t0 = std::time::Instant::now();
+        let mut resp = self
+            .need_list_within(obs, policy, budget)?
+            .cut(held, policy.read_bytes);
+        resp.micros = t0.elapsed().as_micros().min(u32::MAX as u128) as u32;
+        Ok(resp)
+    }
+
+    /// The need list of one observer (before the cut by what the client holds), stopped with
+    /// [`crate::DataError::Deadline`] past `budget`.
+    pub fn need_list_within(
+        &self,
+        obs: &Observer,
+        policy: &Policy,
+        budget: &Budget,
+    ) -> Result<NeedList> {
         let range = ObserverRange::new(obs, policy);
         let (ranged, stab_items, cands, lookahead_cells) = match &self.graph {
-            Some(g) => self.lookahead_with_cells(g, &range, obs, policy, budget)?,
+            Some(g) => {
+                let now = self.visible_now(g, obs)?;
+                self.lookahead_with_cells(g, &range, &now, obs.half_fov_y, policy, budget)?
+            }
             None => (
                 1,
                 Vec::new(),
@@ -177,11 +199,10 @@ impl Prefetcher {
             ),
         };
         budget.check()?;
-        let mut resp = read_set(stab_items, cands, held, policy.read_bytes);
-        resp.range_cells = ranged;
-        resp.lookahead_cells = lookahead_cells;
-        resp.micros = t0.elapsed().as_micros().min(u32::MAX as u128) as u32;
-        Ok(resp)
+        let mut list = NeedList::ordered(stab_items, cands);
+        list.range_cells = ranged;
+        list.lookahead_cells = lookahead_cells;
+        Ok(list)
     }
 
     /// Appends the textured boxes of the clusters above the lookahead objects (the objects in
@@ -241,71 +262,101 @@ fn need(segment: u32, kind: NeedKind, lod: u8, bytes: u64, frames: u32) -> NeedI
     }
 }
 
-/// Orders the lookahead set into the read set and cuts it at `budget` bytes (§5.2.3): stab lists
-/// first, then the geometry of the objects in the observer's view right now, then the rest;
-/// each group by LOD (coarsest first) and frames-until-visible. The coarsest LOD of everything
-/// visible from the eye cell (and its stab list) is always included, budget or not:
-/// Funkhouser's read set is not complete until everything visible now is resident or being read.
+/// The lookahead set in need order, each segment once (§5.2.3's order): stab lists first, then
+/// the geometry of the objects in the observer's view right now, then the rest; each group by
+/// LOD (coarsest first) and frames-until-visible. It does not depend on what the client holds,
+/// so one list serves every client that shares its observer range ([`shared`]).
 ///
 /// Funkhouser orders the whole read set by LOD, then frames: with a cold cache that reads the
 /// coarsest LOD of every object seen from anywhere in the range cells (hundreds) before the
 /// next LOD of the one in front of the observer. Reading the view's objects first keeps his
 /// guarantee and serves the current frame first (measured in the README: fewer LODs skipped
 /// while the cache warms up, the same once it is warm).
-fn read_set(
-    stabs: Vec<NeedItem>,
-    mut cands: Vec<Candidate>,
-    held: &HashSet<u32>,
-    budget: u64,
-) -> PrefetchResponse {
-    cands.sort_unstable_by_key(|c| (!c.now, c.level, c.frames, c.seq));
-    let mut lookahead_segments = HashSet::new();
-    let mut lookahead_bytes = 0u64;
-    let mut objects = 0u32;
-    let mut items = Vec::new();
-    let mut used = 0u64;
-    let mut truncated = false;
-    // Stab lists are as mandatory as the coarsest LODs; impostor atlases come before the
-    // geometry but within the budget.
-    let ordered = stabs
-        .into_iter()
-        .map(|s| (s.kind == NeedKind::Stab, s))
-        .chain(cands.iter().map(|c| (c.level == 0, c.item)));
-    for (coarsest, item) in ordered {
-        if item.kind == NeedKind::Geometry && coarsest {
-            objects += 1;
+#[derive(Debug, Clone, Default)]
+pub struct NeedList {
+    /// Every segment of the lookahead set, in need order.
+    pub items: Vec<NeedItem>,
+    /// Per item: read whatever the budget (a stab list, or the coarsest LOD of an object
+    /// visible from the eye cell: Funkhouser's read set is not complete until everything
+    /// visible now is resident or being read).
+    pub must: Vec<bool>,
+    /// The items' segments, for membership tests.
+    pub segments: HashSet<u32>,
+    /// Range cells found.
+    pub range_cells: u32,
+    /// Cells whose objects entered the lookahead.
+    pub lookahead_cells: u32,
+    /// Objects in the lookahead set.
+    pub lookahead_objects: u32,
+    /// Wire bytes of the whole lookahead set.
+    pub lookahead_bytes: u64,
+}
+
+impl NeedList {
+    /// Orders stab items and candidates (see the type's documentation).
+    fn ordered(stabs: Vec<NeedItem>, mut cands: Vec<Candidate>) -> NeedList {
+        cands.sort_unstable_by_key(|c| (!c.now, c.level, c.frames, c.seq));
+        let mut list = NeedList::default();
+        // Stab lists are as mandatory as the coarsest LODs; impostor atlases come before the
+        // geometry but within the budget.
+        let ordered = stabs
+            .into_iter()
+            .map(|s| (s.kind == NeedKind::Stab, s))
+            .chain(cands.iter().map(|c| (c.level == 0, c.item)));
+        for (coarsest, item) in ordered {
+            if item.kind == NeedKind::Geometry && coarsest {
+                list.lookahead_objects += 1;
+            }
+            if !list.segments.insert(item.segment) {
+                continue; // a definition's LOD shared by several instances
+            }
+            list.lookahead_bytes += item.bytes;
+            list.must.push(coarsest && item.frames == 0);
+            list.items.push(item);
         }
-        if !lookahead_segments.insert(item.segment) {
-            continue; // a definition's LOD shared by several instances
-        }
-        lookahead_bytes += item.bytes;
-        if held.contains(&item.segment) {
-            continue;
-        }
-        let must = coarsest && item.frames == 0;
-        if must || (!truncated && used + item.bytes <= budget) {
-            used += item.bytes;
-            items.push(item);
-        } else {
-            truncated = true;
-        }
+        list
     }
-    let mut evict: Vec<u32> = held
-        .iter()
-        .copied()
-        .filter(|s| !lookahead_segments.contains(s))
-        .collect();
-    evict.sort_unstable();
-    evict.truncate(MAX_RELEASE_HINTS);
-    PrefetchResponse {
-        version: PROTOCOL_VERSION,
-        items,
-        evict,
-        range_cells: 0,
-        lookahead_cells: 0,
-        lookahead_objects: objects,
-        lookahead_bytes,
-        truncated,
-        micros: 0,
+
+    /// Approximate heap bytes (the shared cache's accounting).
+    pub fn heap_bytes(&self) -> usize {
+        self.items.len() * (std::mem::size_of::<NeedItem>() + 1 + 16)
+    }
+
+    /// The read set for a client holding `held`, cut at `budget` bytes (§5.2.3): everything
+    /// mandatory, then items in order while they fit; and release hints for what it holds
+    /// outside the lookahead.
+    pub fn cut(&self, held: &HashSet<u32>, budget: u64) -> PrefetchResponse {
+        let mut items = Vec::new();
+        let mut used = 0u64;
+        let mut truncated = false;
+        for (item, &must) in self.items.iter().zip(&self.must) {
+            if held.contains(&item.segment) {
+                continue;
+            }
+            if must || (!truncated && used + item.bytes <= budget) {
+                used += item.bytes;
+                items.push(*item);
+            } else {
+                truncated = true;
+            }
+        }
+        let mut evict: Vec<u32> = held
+            .iter()
+            .copied()
+            .filter(|s| !self.segments.contains(s))
+            .collect();
+        evict.sort_unstable();
+        evict.truncate(MAX_RELEASE_HINTS);
+        PrefetchResponse {
+            version: PROTOCOL_VERSION,
+            items,
+            evict,
+            range_cells: self.range_cells,
+            lookahead_cells: self.lookahead_cells,
+            lookahead_objects: self.lookahead_objects,
+            lookahead_bytes: self.lookahead_bytes,
+            truncated,
+            micros: 0,
+        }
     }
 }

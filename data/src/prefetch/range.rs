@@ -30,6 +30,17 @@ pub struct ObserverRange {
     pub radius: f32,
     /// The range frustum, or `None` when widening made it cover every direction.
     pub frustum: Option<Frustum>,
+    /// Metres the eye may be from [`ObserverRange::eye`] (0 for one observer; half a cell's
+    /// diagonal for a range shared by every observer in the cell, see
+    /// [`ObserverRange::for_cell`]).
+    pub slack: f32,
+    /// Radians the view direction may be from [`ObserverRange::dir`] (0 for one observer).
+    pub spread: f32,
+    /// The cell Dijkstra starts from (`None`: the cell holding the eye).
+    pub start: Option<u32>,
+    /// With `spread`, the cone every view ray of the shared observers lies in (the direction
+    /// range cull's test); `None` when it covers every direction.
+    pub ray_cone: Option<Frustum>,
 }
 
 impl ObserverRange {
@@ -59,12 +70,63 @@ impl ObserverRange {
             depth,
             radius,
             frustum,
+            slack: 0.0,
+            spread: 0.0,
+            start: None,
+            ray_cone: None,
+        }
+    }
+
+    /// One range that holds the range of every observer in `cell` (box `bounds`) whose view
+    /// direction is within `spread` radians of `dir`, with `obs`'s speed, turn rate and field of
+    /// view: the sphere is centred on the cell and grown by half its diagonal, and the frustum
+    /// (and the direction cull's cone) open by `spread` and step back until they hold the cell.
+    /// Every cone from a point inside a convex cone, opening no wider than it, lies inside it,
+    /// so each test below is a superset of the one observer's. Plane culls cannot be widened
+    /// that way and keep everything.
+    pub fn for_cell(
+        cell: u32,
+        bounds: &Aabb,
+        dir: Vec3,
+        spread: f32,
+        obs: &Observer,
+        policy: &Policy,
+    ) -> ObserverRange {
+        let centre = (Vec3::from(bounds.min) + Vec3::from(bounds.max)) * 0.5;
+        let slack = (Vec3::from(bounds.max) - Vec3::from(bounds.min)).length() * 0.5;
+        let dir = dir.try_normalize().unwrap_or(Vec3::NEG_Z);
+        let step = (obs.max_speed.max(0.0) * policy.frame_time_s.max(0.0)).max(0.0);
+        let depth = policy.depth_frames;
+        let radius = step * depth as f32 + slack;
+        let turn = obs.max_turn.max(0.0) * policy.frame_time_s.max(0.0) * depth as f32;
+        // The view pyramid's corner ray, whatever the roll: a circular bound on its directions.
+        let (tx, ty) = (obs.half_fov_x.max(0.0).tan(), obs.half_fov_y.max(0.0).tan());
+        let corner = (tx * tx + ty * ty).sqrt().atan();
+        let up = if dir.y.abs() < 0.9 { Vec3::Y } else { Vec3::X };
+        let limit = std::f32::consts::FRAC_PI_2 - 0.02;
+        let cone = |half: f32, reach: f32| {
+            (half < limit && half > 0.0).then(|| {
+                let back = reach / half.sin();
+                Frustum::new(centre - dir * back, dir, up, half, half)
+            })
+        };
+        ObserverRange {
+            eye: centre,
+            dir,
+            step,
+            depth,
+            radius,
+            frustum: cone(corner + turn + spread, radius),
+            slack,
+            spread,
+            start: Some(cell),
+            ray_cone: cone(spread, slack),
         }
     }
 
     /// Frames before the observer can reach the box `b` (0 when the eye is inside it).
     pub fn frames_to(&self, b: &Aabb) -> u32 {
-        let d = distance_to_box(self.eye, b);
+        let d = distance_to_box(self.eye, b) - self.slack;
         if d <= 0.0 {
             0
         } else if self.step <= 0.0 {
@@ -77,6 +139,9 @@ impl ObserverRange {
     /// Whether a box is at least partly in front of the observer plane, moved back by the
     /// range radius so that every position in the range counts.
     pub fn in_front(&self, b: &Aabb) -> bool {
+        if self.spread > 0.0 {
+            return true; // no half-space holds every shared observer's
+        }
         let far = Vec3::new(
             if self.dir.x >= 0.0 {
                 b.max[0]
@@ -107,6 +172,9 @@ impl ObserverRange {
 
     /// Whether a ray from the eye along the view direction hits the box.
     pub fn on_ray(&self, b: &Aabb) -> bool {
+        if self.spread > 0.0 {
+            return self.ray_cone.as_ref().is_none_or(|c| c.touches(b));
+        }
         slab(self.eye, self.dir, b).is_some_and(|(_, t1)| t1 >= 0.0)
     }
 
@@ -160,7 +228,7 @@ pub fn start_cell(graph: &CellGraph, eye: Vec3) -> Option<u32> {
 /// portal (a lower bound on any walk, so the range stays a superset of the reachable cells).
 /// Observers cannot walk through walls: only portals connect cells.
 pub fn range_cells(graph: &CellGraph, range: &ObserverRange, cull: RangeCull) -> Vec<(u32, u32)> {
-    let Some(start) = start_cell(graph, range.eye) else {
+    let Some(start) = range.start.or_else(|| start_cell(graph, range.eye)) else {
         return Vec::new();
     };
     let mut best = vec![u32::MAX; graph.cells.len()];
@@ -180,7 +248,11 @@ pub fn range_cells(graph: &CellGraph, range: &ObserverRange, cull: RangeCull) ->
             if done[next] || !nb.live || !range.range_keeps(cull, &nb.bounds) {
                 continue;
             }
-            let f = frames.max(range.frames_to(&portal.rect));
+            // A shared range's slack would put the next rooms at frame 0, where everything is
+            // mandatory: only the eye cell is reached now.
+            let f = frames
+                .max(range.frames_to(&portal.rect))
+                .max(u32::from(range.slack > 0.0));
             if f <= range.depth && f < best[next] {
                 best[next] = f;
                 heap.push(Reverse((f, next as u32)));

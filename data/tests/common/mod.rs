@@ -14,3 +14,21 @@ pub fn tiny_glb(dir: &Path, seed: u64, floors: u32) -> PathBuf {
     std::fs::write(&glb, &b.glb).unwrap();
     glb
 }
+
+/// The tiny building (seed 5, two storeys) built with `opts` into a temporary directory and
+/// opened for prefetch answers, its clusters painted by `painter` if given.
+#[allow(dead_code)] // not every test crate builds one
+pub fn tiny_prefetcher(
+    opts: &portico_data::build::BuildOptions,
+    painter: Option<&mut dyn portico_data::hierarchy::ImpostorPainter>,
+) -> portico_data::prefetch::Prefetcher {
+    let dir = tempfile::tempdir().unwrap();
+    let glb = tiny_glb(dir.path(), 5, 2);
+    let out = dir.path().join("tiny.portico");
+    let model = portico_data::import::import_file(&glb).unwrap();
+    portico_data::build::build_with(model, &out, opts, &portico_data::build::Quiet, painter)
+        .unwrap();
+    // The map stays valid after the directory is removed (the inode lives on).
+    let db = std::sync::Arc::new(portico_data::Database::open(&out).unwrap());
+    portico_data::prefetch::Prefetcher::new(db).unwrap()
+}

@@ -27,6 +27,8 @@ pub mod plot;
 pub mod report;
 pub mod sim;
 pub mod stress;
+pub mod stress_plot;
+pub mod stress_stream;
 pub mod sweep;
 pub mod world;
 

@@ -1,0 +1,283 @@
+//! Shared prefetch answers: one need list for every observer in the same cell looking the same
+//! way, computed once and kept in a cache bounded by memory.
+//!
+//! Funkhouser's lookahead (§5.2.2) depends on the observer only through the cells it can reach
+//! and the directions it can look in. Those are fixed by the eye cell and a direction bucket
+//! ([`direction_bucket`]): [`super::range::ObserverRange::for_cell`] makes one observer range
+//! that holds the range of every observer in the cell whose view lies in the bucket, so the
+//! need list computed from it is a superset of each one's (conservative, like the cells). What
+//! differs per client is only what it already holds: [`super::NeedList::cut`] takes that
+//! difference in one pass over the list.
+//!
+//! So a server answers a crowd on one tour with a handful of computations, and a stream
+//! session computes nothing while its observer stays in its cell and bucket (§5.2's "only when
+//! the observer crosses a cell boundary").
+
+use super::range::ObserverRange;
+use super::{Budget, NeedList, Prefetcher};
+use crate::cells::CellGraph;
+use crate::cells::realtime::Frustum;
+use crate::error::Result;
+use glam::Vec3;
+use portico_protocol::{Observer, Policy};
+use std::collections::HashSet;
+use std::f32::consts::PI;
+use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+use std::sync::{Arc, Mutex};
+
+/// Azimuth sectors of the direction buckets (15° each).
+pub const AZIMUTH_BUCKETS: u32 = 24;
+/// Elevation bands of the direction buckets (20° each, from straight down to straight up).
+pub const ELEVATION_BUCKETS: u32 = 9;
+/// Radians any direction in a bucket may be from the bucket's centre: half a sector plus half a
+/// band (the great-circle angle is at most the elevation step plus the azimuth step).
+pub const BUCKET_SPREAD: f32 = PI / AZIMUTH_BUCKETS as f32 + PI / (2.0 * ELEVATION_BUCKETS as f32);
+/// Default memory for cached need lists (bytes).
+pub const DEFAULT_CACHE_BYTES: usize = 64 << 20;
+
+/// The bucket of a view direction (y up) and the bucket's centre direction (unit).
+pub fn direction_bucket(dir: Vec3) -> (u16, Vec3) {
+    let d = dir.try_normalize().unwrap_or(Vec3::NEG_Z);
+    let az = d.z.atan2(d.x).rem_euclid(2.0 * PI);
+    let el = d.y.clamp(-1.0, 1.0).asin() + PI / 2.0; // 0..π
+    let a = ((az / (2.0 * PI) * AZIMUTH_BUCKETS as f32) as u32).min(AZIMUTH_BUCKETS - 1);
+    let e = ((el / PI * ELEVATION_BUCKETS as f32) as u32).min(ELEVATION_BUCKETS - 1);
+    let (ca, ce) = (
+        (a as f32 + 0.5) * 2.0 * PI / AZIMUTH_BUCKETS as f32,
+        (e as f32 + 0.5) * PI / ELEVATION_BUCKETS as f32 - PI / 2.0,
+    );
+    let centre = Vec3::new(ce.cos() * ca.cos(), ce.sin(), ce.cos() * ca.sin());
+    ((e * AZIMUTH_BUCKETS + a) as u16, centre)
+}
+
+/// Where an observer stands for sharing: the eye cell, the direction bucket, and its speed,
+/// turn rate and field of view (exact bits: one client sends the same ones every frame). A
+/// stream session recomputes only when this changes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct SharePlace {
+    /// The live cell the eye is in (or the nearest live one).
+    pub cell: u32,
+    /// [`direction_bucket`].
+    pub bucket: u16,
+    motion: [u32; 4],
+}
+
+/// What a shared need list depends on: the [`SharePlace`] and the policy (its bincode bytes).
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub struct ShareKey {
+    /// The observer's place.
+    pub place: SharePlace,
+    policy: Arc<[u8]>,
+}
+
+impl ShareKey {
+    /// The key of `place` under a policy already encoded with [`encode_policy`].
+    pub fn new(place: SharePlace, policy: Arc<[u8]>) -> ShareKey {
+        ShareKey { place, policy }
+    }
+}
+
+/// A policy's bytes for [`ShareKey::new`] (encode once per session, not per observer).
+pub fn encode_policy(policy: &Policy) -> Arc<[u8]> {
+    portico_protocol::to_bincode(policy)
+        .unwrap_or_default()
+        .into()
+}
+
+/// The cache of shared need lists, least recently used dropped first past its byte bound.
+pub struct SharedAnswers {
+    lists: Mutex<(lru::LruCache<ShareKey, Arc<NeedList>>, usize)>,
+    capacity: usize,
+    /// Lookups answered from the cache.
+    pub hits: AtomicU64,
+    /// Lookups that computed a list.
+    pub misses: AtomicU64,
+}
+
+impl SharedAnswers {
+    /// A cache holding at most `capacity` bytes of need lists.
+    pub fn new(capacity: usize) -> SharedAnswers {
+        SharedAnswers {
+            lists: Mutex::new((lru::LruCache::unbounded(), 0)),
+            capacity,
+            hits: AtomicU64::new(0),
+            misses: AtomicU64::new(0),
+        }
+    }
+
+    /// Lists cached and their bytes.
+    pub fn usage(&self) -> (usize, usize) {
+        let g = self.lists.lock().unwrap_or_else(|e| e.into_inner());
+        (g.0.len(), g.1)
+    }
+
+    fn get(&self, key: &ShareKey) -> Option<Arc<NeedList>> {
+        let mut g = self.lists.lock().unwrap_or_else(|e| e.into_inner());
+        g.0.get(key).cloned()
+    }
+
+    fn put(&self, key: ShareKey, list: Arc<NeedList>) {
+        let bytes = entry_bytes(&key, &list);
+        if bytes > self.capacity {
+            return;
+        }
+        let mut g = self.lists.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(old) = g.0.put(key.clone(), list) {
+            g.1 -= entry_bytes(&key, &old);
+        }
+        g.1 += bytes;
+        while g.1 > self.capacity {
+            let Some((k, l)) = g.0.pop_lru() else { break };
+            g.1 -= entry_bytes(&k, &l);
+        }
+    }
+}
+
+fn entry_bytes(key: &ShareKey, list: &NeedList) -> usize {
+    list.heap_bytes() + key.policy.len() + 64
+}
+
+impl Prefetcher {
+    /// Where `obs` stands for sharing; `None` without cells (or without a live cell), where
+    /// answers are computed per observer. Cheap: a k-D descent and an `atan2`.
+    pub fn share_place(&self, obs: &Observer) -> Option<SharePlace> {
+        let graph = self.graph.as_ref()?;
+        let cell = super::range::start_cell(graph, Vec3::from(obs.eye))?;
+        Some(SharePlace {
+            cell,
+            bucket: direction_bucket(Vec3::from(obs.dir)).0,
+            motion: [
+                obs.max_speed.to_bits(),
+                obs.max_turn.to_bits(),
+                obs.half_fov_x.to_bits(),
+                obs.half_fov_y.to_bits(),
+            ],
+        })
+    }
+
+    /// The key of the shared need list serving `obs` under `policy` (see
+    /// [`Prefetcher::share_place`]).
+    pub fn share_key(&self, obs: &Observer, policy: &Policy) -> Option<ShareKey> {
+        Some(ShareKey::new(self.share_place(obs)?, encode_policy(policy)))
+    }
+
+    /// The cached need list for `key`, if any (cheap: one lock and a hash lookup).
+    pub fn shared_cached(&self, key: &ShareKey) -> Option<Arc<NeedList>> {
+        let hit = self.shared.get(key);
+        if hit.is_some() {
+            self.shared.hits.fetch_add(1, Relaxed);
+        }
+        hit
+    }
+
+    /// The need list every observer with `key` shares: from the cache, or computed from the
+    /// widened range of the key's cell and bucket (with `obs`'s speed, turn rate and field of
+    /// view) and cached. Errors: [`crate::DataError::Deadline`] past `budget`; a damaged stab
+    /// list.
+    pub fn shared_list(
+        &self,
+        key: &ShareKey,
+        obs: &Observer,
+        policy: &Policy,
+        budget: &Budget,
+    ) -> Result<Arc<NeedList>> {
+        if let Some(l) = self.shared_cached(key) {
+            return Ok(l);
+        }
+        let Some(graph) = self.graph.as_ref() else {
+            return Ok(Arc::new(NeedList::default()));
+        };
+        self.shared.misses.fetch_add(1, Relaxed);
+        let cell = key.place.cell;
+        let bounds = graph.cells[cell as usize].bounds;
+        let (_, dir) = direction_bucket(Vec3::from(obs.dir));
+        let range = ObserverRange::for_cell(cell, &bounds, dir, BUCKET_SPREAD, obs, policy);
+        let now = self.visible_from_cell(graph, cell, &range, obs)?;
+        let (ranged, stabs, cands, cells) =
+            self.lookahead_with_cells(graph, &range, &now, obs.half_fov_y, policy, budget)?;
+        budget.check()?;
+        let mut list = NeedList::ordered(stabs, cands);
+        list.range_cells = ranged;
+        list.lookahead_cells = cells;
+        let list = Arc::new(list);
+        self.shared.put(key.clone(), list.clone());
+        Ok(list)
+    }
+
+    /// The shared-answer cache (its counters and usage).
+    pub fn shared_answers(&self) -> &SharedAnswers {
+        &self.shared
+    }
+
+    /// What any observer of the shared range may see now: the objects the cell's stab list
+    /// lists, in a view cone opened by the bucket's spread and stepped back to hold the cell
+    /// (a superset of each observer's eye-to-object set, §4.1.2).
+    fn visible_from_cell(
+        &self,
+        graph: &CellGraph,
+        cell: u32,
+        range: &ObserverRange,
+        obs: &Observer,
+    ) -> Result<HashSet<u32>> {
+        if !graph.cells[cell as usize].live {
+            return Ok(HashSet::new());
+        }
+        let (tx, ty) = (obs.half_fov_x.max(0.0).tan(), obs.half_fov_y.max(0.0).tan());
+        let half = (tx * tx + ty * ty).sqrt().atan() + range.spread;
+        let cone = (half < PI / 2.0 - 0.02).then(|| {
+            let up = if range.dir.y.abs() < 0.9 {
+                Vec3::Y
+            } else {
+                Vec3::X
+            };
+            Frustum::new(
+                range.eye - range.dir * (range.slack / half.sin()),
+                range.dir,
+                up,
+                half,
+                half,
+            )
+        });
+        let stab = self.stab(cell)?;
+        Ok(stab
+            .entries
+            .iter()
+            .flat_map(|e| e.objects.iter().copied())
+            .filter(|&o| {
+                cone.as_ref()
+                    .is_none_or(|c| c.touches(&self.bounds[o as usize]))
+            })
+            .collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_direction_is_within_the_spread_of_its_bucket_centre() {
+        let mut worst = 0.0f32;
+        for i in 0..4000 {
+            // A spiral over the sphere.
+            let y = 1.0 - 2.0 * (i as f32 + 0.5) / 4000.0;
+            let r = (1.0 - y * y).sqrt();
+            let phi = i as f32 * 2.399_963;
+            let d = Vec3::new(r * phi.cos(), y, r * phi.sin());
+            let (b, c) = direction_bucket(d);
+            assert!(u32::from(b) < AZIMUTH_BUCKETS * ELEVATION_BUCKETS);
+            worst = worst.max(d.angle_between(c));
+        }
+        assert!(worst <= BUCKET_SPREAD, "{worst} > {BUCKET_SPREAD}");
+        // The bound is not loose by more than a third (the buckets are as fine as claimed).
+        assert!(worst > BUCKET_SPREAD * 0.66, "{worst}");
+    }
+
+    #[test]
+    fn nearby_directions_share_a_bucket_and_opposite_ones_do_not() {
+        let a = direction_bucket(Vec3::new(1.0, 0.0, 0.01)).0;
+        assert_eq!(a, direction_bucket(Vec3::new(1.0, 0.01, 0.02)).0);
+        assert_ne!(a, direction_bucket(Vec3::new(-1.0, 0.0, 0.0)).0);
+        assert_ne!(a, direction_bucket(Vec3::new(0.0, 0.0, 1.0)).0);
+    }
+}

@@ -1,0 +1,213 @@
+//! Shared need lists (one per eye cell and direction bucket): each is a superset of the answer
+//! of every observer it serves, it is computed once and then served from the cache, and the
+//! per-client cut leaves out what the client holds.
+
+use glam::Vec3;
+use portico_data::build::BuildOptions;
+use portico_data::prefetch::shared::direction_bucket;
+use portico_data::prefetch::{Budget, Prefetcher};
+use portico_protocol::{LookaheadCull, Observer, Policy, RangeCull};
+use std::collections::HashSet;
+use std::sync::atomic::Ordering::Relaxed;
+use std::sync::{Arc, OnceLock};
+
+mod common;
+
+fn prefetcher() -> &'static Prefetcher {
+    static P: OnceLock<Prefetcher> = OnceLock::new();
+    P.get_or_init(|| common::tiny_prefetcher(&BuildOptions::default(), None))
+}
+
+/// Observers at several points of every live cell (corners included), looking in eight
+/// directions, some tilted.
+fn observers(p: &Prefetcher) -> Vec<Observer> {
+    let g = p.graph().unwrap();
+    let mut out = Vec::new();
+    for (i, c) in g.cells.iter().enumerate().filter(|(_, c)| c.live) {
+        let (lo, hi) = (Vec3::from(c.bounds.min), Vec3::from(c.bounds.max));
+        for (k, t) in [0.5f32, 0.02, 0.98, 0.3].into_iter().enumerate() {
+            let at = Vec3::new(t, 0.5, 1.0 - t);
+            let eye = lo + (hi - lo) * at;
+            let a = (i * 4 + k) as f32 * 0.785;
+            let dir = Vec3::new(a.cos(), (k as f32 - 1.5) * 0.2, a.sin()).normalize();
+            out.push(Observer {
+                eye: eye.into(),
+                dir: dir.into(),
+                up: [0.0, 1.0, 0.0],
+                velocity: [0.0; 3],
+                half_fov_x: 0.6,
+                half_fov_y: 0.45,
+                max_speed: 1.5,
+                max_turn: 1.0,
+            });
+        }
+    }
+    out
+}
+
+fn policies() -> Vec<Policy> {
+    let base = Policy {
+        cache_bytes: u64::MAX / 4,
+        read_bytes: u64::MAX / 4,
+        ..Policy::default()
+    };
+    let mut out = Vec::new();
+    for range_cull in [RangeCull::Direction, RangeCull::Frustum, RangeCull::Any] {
+        for lookahead_cull in [LookaheadCull::Any, LookaheadCull::Frustum] {
+            out.push(Policy {
+                range_cull,
+                lookahead_cull,
+                ..base
+            });
+        }
+    }
+    out
+}
+
+#[test]
+fn a_shared_list_holds_every_served_observers_whole_lookahead_and_its_mandatory_part() {
+    let p = prefetcher();
+    let (mut checked, mut exact_bytes, mut shared_bytes) = (0, 0u64, 0u64);
+    for policy in policies() {
+        for obs in observers(p) {
+            let key = p.share_key(&obs, &policy).expect("the building has cells");
+            let shared = p
+                .shared_list(&key, &obs, &policy, &Budget::unlimited())
+                .unwrap();
+            let exact = p.answer(&obs, &policy, &HashSet::new()).unwrap();
+            assert!(!exact.items.is_empty());
+            for item in &exact.items {
+                assert!(
+                    shared.segments.contains(&item.segment),
+                    "{policy:?} at {:?}: segment {} of the exact answer is not in the shared list",
+                    obs.eye,
+                    item.segment
+                );
+            }
+            // What the observer must read now, the shared list reads now too (the eye cell's
+            // coarsest LODs and stab list are mandatory in both).
+            let must: HashSet<u32> = shared
+                .items
+                .iter()
+                .zip(&shared.must)
+                .filter(|(_, m)| **m)
+                .map(|(i, _)| i.segment)
+                .collect();
+            let exact_must = p
+                .answer(
+                    &obs,
+                    &Policy {
+                        read_bytes: 0,
+                        ..policy
+                    },
+                    &HashSet::new(),
+                )
+                .unwrap();
+            let cell = key.place.cell;
+            let stab = p.stab(cell).unwrap();
+            let here: HashSet<u32> = stab
+                .entries
+                .iter()
+                .flat_map(|e| e.objects.clone())
+                .collect();
+            let header = p.database().header();
+            for item in &exact_must.items {
+                let ours = here.iter().any(|&o| {
+                    let lods = header.lods_of(&header.instances[o as usize]);
+                    lods.last().unwrap().segment == item.segment
+                });
+                if ours || p.stab_segment(cell) == Some(item.segment) {
+                    assert!(
+                        must.contains(&item.segment),
+                        "{} not mandatory",
+                        item.segment
+                    );
+                }
+            }
+            checked += 1;
+            exact_bytes += exact.lookahead_bytes;
+            shared_bytes += shared.lookahead_bytes;
+        }
+    }
+    assert!(checked > 100, "{checked}");
+    // Conservative, not everything: the widened lists stay within a small factor of the exact.
+    let ratio = shared_bytes as f64 / exact_bytes as f64;
+    eprintln!("shared / exact lookahead bytes: {ratio:.2} over {checked} observers");
+    assert!((1.0..2.0).contains(&ratio), "{ratio}");
+}
+
+#[test]
+fn one_computation_serves_everyone_in_the_cell_and_bucket() {
+    let p = prefetcher();
+    let policy = Policy::default();
+    let g = p.graph().unwrap();
+    let (i, c) = g
+        .cells
+        .iter()
+        .enumerate()
+        .find(|(_, c)| c.live && c.bounds.max[0] - c.bounds.min[0] > 1.0)
+        .unwrap();
+    let (lo, hi) = (Vec3::from(c.bounds.min), Vec3::from(c.bounds.max));
+    let at = |t: f32, dir: Vec3| Observer {
+        eye: (lo + (hi - lo) * Vec3::new(t, 0.5, t)).into(),
+        dir: dir.into(),
+        up: [0.0, 1.0, 0.0],
+        velocity: [0.0; 3],
+        half_fov_x: 0.6,
+        half_fov_y: 0.45,
+        max_speed: 1.5,
+        max_turn: 1.0,
+    };
+    let a = at(0.3, Vec3::new(1.0, 0.0, 0.05));
+    let b = at(0.7, Vec3::new(1.0, 0.02, 0.08));
+    let ka = p.share_key(&a, &policy).unwrap();
+    let kb = p.share_key(&b, &policy).unwrap();
+    assert_eq!(ka, kb);
+    assert_eq!(ka.place.cell as usize, i);
+    let hits = p.shared_answers().hits.load(Relaxed);
+    let la = p
+        .shared_list(&ka, &a, &policy, &Budget::unlimited())
+        .unwrap();
+    let lb = p
+        .shared_list(&kb, &b, &policy, &Budget::unlimited())
+        .unwrap();
+    assert!(
+        Arc::ptr_eq(&la, &lb),
+        "the second observer computed its own list"
+    );
+    assert!(p.shared_answers().hits.load(Relaxed) > hits);
+    assert!(p.shared_cached(&ka).is_some());
+    // Turning past the bucket, or another policy, is another list.
+    let turned = at(0.3, Vec3::new(-1.0, 0.0, 0.0));
+    assert_ne!(p.share_key(&turned, &policy).unwrap(), ka);
+    assert_ne!(direction_bucket(Vec3::X).0, direction_bucket(Vec3::NEG_X).0);
+    let deeper = Policy {
+        depth_frames: 32,
+        ..policy
+    };
+    assert_ne!(p.share_key(&a, &deeper).unwrap(), ka);
+}
+
+#[test]
+fn the_per_client_cut_leaves_out_what_it_holds_and_keeps_the_mandatory_part() {
+    let p = prefetcher();
+    let policy = Policy::default();
+    let obs = observers(p)[0];
+    let key = p.share_key(&obs, &policy).unwrap();
+    let list = p
+        .shared_list(&key, &obs, &policy, &Budget::unlimited())
+        .unwrap();
+    let all = list.cut(&HashSet::new(), u64::MAX);
+    assert_eq!(all.items.len(), list.items.len());
+    let held: HashSet<u32> = list.items.iter().step_by(2).map(|i| i.segment).collect();
+    let rest = list.cut(&held, u64::MAX);
+    assert_eq!(rest.items.len(), list.items.len() - held.len());
+    assert!(rest.items.iter().all(|i| !held.contains(&i.segment)));
+    let none = list.cut(&HashSet::new(), 0);
+    let must = list.must.iter().filter(|m| **m).count();
+    assert!(must > 0);
+    assert_eq!(none.items.len(), must);
+    // Held segments outside the list are release hints.
+    let stray: HashSet<u32> = [u32::MAX - 1].into();
+    assert_eq!(list.cut(&stray, 0).evict, vec![u32::MAX - 1]);
+}
