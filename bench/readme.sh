@@ -36,7 +36,7 @@ trap stop EXIT
 # (Started directly, not through a function or subshell: $! must be the server's pid.)
 serve() {
   stop
-  "$bin" serve "$1" >"serve-$(basename "$1").log" 2>&1 &
+  "$bin" serve "$@" >"serve-$(basename "$1").log" 2>&1 &
   server=$!
   for _ in $(seq 100); do
     curl -fs http://127.0.0.1:7878/healthz >/dev/null 2>&1 && return
@@ -68,6 +68,11 @@ step cull soda.portico --tour 20
 serve soda.portico
 step loadtest --path tour.json --stress 1,16,64 -o st
 step loadtest --path tour.json --stress 1,16,64 -o st-closed --closed-loop
+# A crowd on the push stream: shared need lists, then every observer its own (the baseline).
+step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1kbit -o ss
+step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1mbit -o ss-push
+serve soda.portico --exact-answers
+step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1kbit -o ss-exact
 
 serve soda.flat.portico
 step walk --server http://127.0.0.1:7878 --path tour.json --cache-mb 64 --max-frames 2400 -o w64

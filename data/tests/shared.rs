@@ -211,3 +211,40 @@ fn the_per_client_cut_leaves_out_what_it_holds_and_keeps_the_mandatory_part() {
     let stray: HashSet<u32> = [u32::MAX - 1].into();
     assert_eq!(list.cut(&stray, 0).evict, vec![u32::MAX - 1]);
 }
+
+#[test]
+fn a_crowd_asking_for_one_place_at_once_computes_its_list_once() {
+    // A prefetcher of its own: the counters are not shared with the other tests.
+    let p = Prefetcher::new(prefetcher().database().clone()).unwrap();
+    let policy = Policy::default();
+    let obs = observers(&p)[5];
+    let key = p.share_key(&obs, &policy).unwrap();
+    let start = std::sync::Barrier::new(8);
+    let lists: Vec<_> = std::thread::scope(|s| {
+        let tasks: Vec<_> = (0..8)
+            .map(|_| {
+                s.spawn(|| {
+                    start.wait();
+                    p.shared_list(&key, &obs, &policy, &Budget::unlimited())
+                        .unwrap()
+                })
+            })
+            .collect();
+        tasks.into_iter().map(|t| t.join().unwrap()).collect()
+    });
+    assert_eq!(p.shared_answers().misses.load(Relaxed), 1);
+    assert!(lists.iter().all(|l| Arc::ptr_eq(l, &lists[0])));
+    assert_eq!(p.shared_answers().usage().0, 1);
+    // A bound below one list keeps nothing, and the next ask computes again.
+    p.shared_answers().set_capacity(0);
+    let other = Policy {
+        depth_frames: 8,
+        ..policy
+    };
+    let k2 = p.share_key(&obs, &other).unwrap();
+    p.shared_list(&k2, &obs, &other, &Budget::unlimited())
+        .unwrap();
+    p.shared_list(&k2, &obs, &other, &Budget::unlimited())
+        .unwrap();
+    assert_eq!(p.shared_answers().misses.load(Relaxed), 3);
+}

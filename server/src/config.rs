@@ -37,6 +37,8 @@ pub struct Config {
     /// when the observer leaves them (`portico_data::prefetch::shared`); off, every observer
     /// gets its own list, computed for it (exact; the baseline of the stress figures).
     pub shared_answers: bool,
+    /// Memory for the shared need lists (bytes; least recently used dropped first).
+    pub shared_cache_bytes: usize,
     /// How long requests in flight may finish after a stop or reload before their connections
     /// are closed.
     pub drain: Duration,
@@ -59,6 +61,7 @@ impl Default for Config {
             header_timeout: Duration::from_secs(10),
             drain: Duration::from_secs(10),
             shared_answers: true,
+            shared_cache_bytes: portico_data::prefetch::shared::DEFAULT_CACHE_BYTES,
         }
     }
 }

@@ -67,9 +67,13 @@ impl AppState {
                     .expect("hex digits are a valid header value")
             })
             .collect();
+        let prefetcher = Prefetcher::new(db)?;
+        prefetcher
+            .shared_answers()
+            .set_capacity(config.shared_cache_bytes);
         Ok(Arc::new(AppState {
             etags,
-            prefetcher: Prefetcher::new(db)?,
+            prefetcher,
             compute: Compute::new(config.compute_slots, config.compute_deadline),
             config,
             metrics: Metrics::default(),

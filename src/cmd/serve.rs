@@ -45,6 +45,9 @@ pub struct Args {
     /// direction bucket (the baseline the shared answers are measured against; exact, costly).
     #[arg(long)]
     exact_answers: bool,
+    /// Memory for the stream sessions' shared need lists, MB.
+    #[arg(long, default_value_t = 256)]
+    shared_cache_mb: usize,
     /// After SIGTERM or SIGHUP, seconds the requests in flight have to finish before their
     /// connections are closed.
     #[arg(long, default_value_t = 10)]
@@ -62,6 +65,7 @@ pub fn run(a: Args) -> Result<()> {
         compute_deadline: Duration::from_millis(a.prefetch_deadline_ms.max(1)),
         drain: Duration::from_secs(a.drain_secs),
         shared_answers: !a.exact_answers,
+        shared_cache_bytes: a.shared_cache_mb << 20,
         ..Config::default()
     };
     let state = AppState::open(&a.file, config.clone())?;

@@ -20,9 +20,9 @@ use crate::cells::realtime::Frustum;
 use crate::error::Result;
 use glam::Vec3;
 use portico_protocol::{Observer, Policy};
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::f32::consts::PI;
-use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
 use std::sync::{Arc, Mutex};
 
 /// Azimuth sectors of the direction buckets (15° each).
@@ -32,8 +32,9 @@ pub const ELEVATION_BUCKETS: u32 = 9;
 /// Radians any direction in a bucket may be from the bucket's centre: half a sector plus half a
 /// band (the great-circle angle is at most the elevation step plus the azimuth step).
 pub const BUCKET_SPREAD: f32 = PI / AZIMUTH_BUCKETS as f32 + PI / (2.0 * ELEVATION_BUCKETS as f32);
-/// Default memory for cached need lists (bytes).
-pub const DEFAULT_CACHE_BYTES: usize = 64 << 20;
+/// Default memory for cached need lists (bytes): a list on flattened `mega` is about 1 MB, and
+/// a crowd on a tour keeps a few hundred places warm.
+pub const DEFAULT_CACHE_BYTES: usize = 256 << 20;
 
 /// The bucket of a view direction (y up) and the bucket's centre direction (unit).
 pub fn direction_bucket(dir: Vec3) -> (u16, Vec3) {
@@ -87,7 +88,10 @@ pub fn encode_policy(policy: &Policy) -> Arc<[u8]> {
 /// The cache of shared need lists, least recently used dropped first past its byte bound.
 pub struct SharedAnswers {
     lists: Mutex<(lru::LruCache<ShareKey, Arc<NeedList>>, usize)>,
-    capacity: usize,
+    capacity: AtomicUsize,
+    /// One gate per list being computed: whoever else needs it waits for that computation
+    /// instead of repeating it (a crowd entering a room asks for its list at once).
+    computing: Mutex<HashMap<ShareKey, Arc<Mutex<()>>>>,
     /// Lookups answered from the cache.
     pub hits: AtomicU64,
     /// Lookups that computed a list.
@@ -99,10 +103,16 @@ impl SharedAnswers {
     pub fn new(capacity: usize) -> SharedAnswers {
         SharedAnswers {
             lists: Mutex::new((lru::LruCache::unbounded(), 0)),
-            capacity,
+            capacity: AtomicUsize::new(capacity),
+            computing: Mutex::new(HashMap::new()),
             hits: AtomicU64::new(0),
             misses: AtomicU64::new(0),
         }
+    }
+
+    /// Changes the bound (bytes); lists past it go at the next insertion.
+    pub fn set_capacity(&self, bytes: usize) {
+        self.capacity.store(bytes, Relaxed);
     }
 
     /// Lists cached and their bytes.
@@ -117,8 +127,9 @@ impl SharedAnswers {
     }
 
     fn put(&self, key: ShareKey, list: Arc<NeedList>) {
+        let capacity = self.capacity.load(Relaxed);
         let bytes = entry_bytes(&key, &list);
-        if bytes > self.capacity {
+        if bytes > capacity {
             return;
         }
         let mut g = self.lists.lock().unwrap_or_else(|e| e.into_inner());
@@ -126,7 +137,7 @@ impl SharedAnswers {
             g.1 -= entry_bytes(&key, &old);
         }
         g.1 += bytes;
-        while g.1 > self.capacity {
+        while g.1 > capacity {
             let Some((k, l)) = g.0.pop_lru() else { break };
             g.1 -= entry_bytes(&k, &l);
         }
@@ -184,6 +195,40 @@ impl Prefetcher {
         if let Some(l) = self.shared_cached(key) {
             return Ok(l);
         }
+        let gate = {
+            let mut c = self
+                .shared
+                .computing
+                .lock()
+                .unwrap_or_else(|e| e.into_inner());
+            c.entry(key.clone()).or_default().clone()
+        };
+        let done = {
+            let _turn = gate.lock().unwrap_or_else(|e| e.into_inner());
+            // Someone may have computed it while this waited.
+            match self.shared_cached(key) {
+                Some(l) => Ok(l),
+                None => self.compute_shared(key, obs, policy, budget),
+            }
+        };
+        let mut c = self
+            .shared
+            .computing
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        if c.get(key).is_some_and(|g| Arc::ptr_eq(g, &gate)) && Arc::strong_count(&gate) <= 2 {
+            c.remove(key);
+        }
+        done
+    }
+
+    fn compute_shared(
+        &self,
+        key: &ShareKey,
+        obs: &Observer,
+        policy: &Policy,
+        budget: &Budget,
+    ) -> Result<Arc<NeedList>> {
         let Some(graph) = self.graph.as_ref() else {
             return Ok(Arc::new(NeedList::default()));
         };
