@@ -134,7 +134,7 @@ fn loadtest_stress_and_bench_run_from_the_command_line() {
         "1,4",
         "--stream",
         "--stress-seconds",
-        "1",
+        "2",
         "--link",
         "rtt=0ms,rate=1mbit",
         "-o",
@@ -147,10 +147,15 @@ fn loadtest_stress_and_bench_run_from_the_command_line() {
     for (l, clients) in levels.iter().zip([1u64, 4]) {
         assert_eq!(l["connected"], clients, "{l}");
         let updates = l["updates"].as_u64().unwrap();
-        // 20 updates per second per client, give or take the window's edges.
-        assert!(updates >= 15 * clients, "{l}");
-        assert!(l["lists_taken"].as_u64().unwrap() < updates / 2, "{l}");
-        assert!(l["lists_computed"].as_u64().unwrap() <= l["lists_taken"].as_u64().unwrap());
+        // 20 updates per second per client for 2 s; at least half of them on a loaded machine.
+        assert!(updates >= 20 * clients, "{l}");
+        let taken = l["lists_taken"].as_u64().unwrap();
+        assert!(taken < updates / 2, "{l}");
+        // A computation started in the window may end after it.
+        assert!(
+            l["lists_computed"].as_u64().unwrap() <= taken + clients,
+            "{l}"
+        );
         assert!(l["server_cpu_s"].as_f64().unwrap() > 0.0, "{l}");
         assert!(l["ping_s"]["max"].as_f64().unwrap() > 0.0, "{l}");
     }

@@ -419,25 +419,10 @@ fn the_whole_read_order_is_now_then_level_then_frames() {
     }
 }
 
-/// A painter that paints nothing real: every cluster gets an "atlas" of a few bytes (the
-/// prefetcher never decodes it) and grey faces, so the database has textured boxes.
-struct FakePainter;
-
-impl portico_data::hierarchy::ImpostorPainter for FakePainter {
-    fn paint(
-        &mut self,
-        _: &[portico_data::hierarchy::PaintItem<'_>],
-        _: &portico_data::geometry::Aabb,
-        _: u32,
-    ) -> Result<(Vec<u8>, [[f32; 4]; 6]), String> {
-        Ok((b"\x89PNG fake atlas".to_vec(), [[0.5, 0.5, 0.5, 1.0]; 6]))
-    }
-}
-
 /// The tiny building with textured cluster boxes.
 fn with_impostors() -> &'static Prefetcher {
     static P: OnceLock<Prefetcher> = OnceLock::new();
-    P.get_or_init(|| tiny(false, Some(&mut FakePainter)))
+    P.get_or_init(|| tiny(false, Some(&mut common::FakePainter)))
 }
 
 /// Maciel & Shirley's textured boxes come before any geometry, once each, never for a cluster

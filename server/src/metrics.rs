@@ -75,14 +75,15 @@ impl Metrics {
         r.latency_sum_us.fetch_add((seconds * 1e6) as u64, Relaxed);
     }
 
-    /// Records one stream update's latency (arrival to need list in place).
-    pub fn update(&self, seconds: f64) {
+    /// Records `updates` stream updates served after `seconds` (arrival of the oldest to its
+    /// need list in place, or to the end of a computation that failed or was stale).
+    pub fn update(&self, seconds: f64, updates: u64) {
         if let Some(b) = BUCKETS.iter().position(|&ub| seconds <= ub) {
-            self.update_buckets[b].fetch_add(1, Relaxed);
+            self.update_buckets[b].fetch_add(updates, Relaxed);
         }
         self.update_sum_us
-            .fetch_add((seconds * 1e6) as u64, Relaxed);
-        self.update_count.fetch_add(1, Relaxed);
+            .fetch_add((seconds * 1e6) as u64 * updates, Relaxed);
+        self.update_count.fetch_add(updates, Relaxed);
     }
 
     /// Counts bytes of one segment sent.
@@ -206,7 +207,7 @@ impl Metrics {
             (
                 "portico_prefetch_answers_total",
                 "counter",
-                "Prefetch answers computed.",
+                "Prefetch answers computed, and need lists stream sessions took.",
                 self.prefetch_answers.load(Relaxed) as i64,
             ),
             (

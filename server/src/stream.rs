@@ -64,9 +64,19 @@ pub async fn upgrade(State(s): State<Arc<AppState>>, ws: WebSocketUpgrade) -> Re
 /// A need list being computed for the session.
 type Computing = Pin<Box<dyn Future<Output = Result<Arc<NeedList>, Error>> + Send>>;
 
-/// An observer waiting for its need list: the observer, its place (`None` without cells) and
-/// when it arrived.
-type Pending = (Observer, Option<SharePlace>, Instant);
+/// An observer waiting for its need list.
+#[derive(Clone, Copy)]
+struct Pending {
+    obs: Observer,
+    /// Its place (`None`: without cells, or answers not shared).
+    place: Option<SharePlace>,
+    /// When the oldest observer it replaced arrived (latency counts from there).
+    arrived: Instant,
+    /// Observers it stands for (it and those it replaced).
+    updates: u64,
+    /// The session's policy generation when it arrived.
+    generation: u64,
+}
 
 /// One client's session state.
 struct Session {
@@ -83,6 +93,10 @@ struct Session {
     cursor: usize,
     /// The place `list` was made for (`None`: for one observer, or nothing yet).
     place: Option<SharePlace>,
+    /// The place of the latest observer: a list computed for another is stale on arrival.
+    want: Option<SharePlace>,
+    /// Bumped when Hello changes the policy: lists computed under an older one are stale.
+    generation: u64,
     /// When the paced link is free for the next push.
     next_free: Instant,
     /// The latest observer not yet served (older ones are dropped: only the latest matters).
@@ -102,6 +116,8 @@ impl Session {
             list: Arc::new(NeedList::default()),
             cursor: 0,
             place: None,
+            want: None,
+            generation: 0,
             next_free: Instant::now(),
             pending: None,
         }
@@ -116,12 +132,12 @@ impl Session {
         let idle = self.state.config.idle_timeout;
         let write_timeout = self.state.config.write_timeout;
         let mut idle_deadline = Instant::now() + idle;
-        let mut computing: Option<(Computing, Option<SharePlace>, Instant)> = None;
+        let mut computing: Option<(Computing, Pending)> = None;
         loop {
             if computing.is_none()
-                && let Some((obs, place, arrived)) = self.pending.take()
+                && let Some(p) = self.pending.take()
             {
-                computing = Some((self.compute(obs, place), place, arrived));
+                computing = Some((self.compute(p.obs, p.place), p));
             }
             let push_at = (self.cursor < self.list.items.len()).then_some(self.next_free);
             let outgoing = tokio::select! {
@@ -134,8 +150,8 @@ impl Session {
                     }
                 }
                 done = async { computing.as_mut().expect("guarded").0.as_mut().await }, if computing.is_some() => {
-                    let (_, place, arrived) = computing.take().expect("guarded");
-                    self.on_list(done, place, arrived)
+                    let (_, p) = computing.take().expect("guarded");
+                    self.on_computed(done, p)
                 }
                 _ = sleep_until(push_at.unwrap_or(idle_deadline)), if push_at.is_some() => {
                     self.next_push()
@@ -205,7 +221,11 @@ impl Session {
                 if policy != self.policy {
                     self.policy = policy;
                     self.policy_bytes = encode_policy(&policy);
+                    self.generation += 1; // what is being computed is for the old policy
                     self.place = None; // the next observer gets the new policy's list
+                    if let Some(p) = &mut self.pending {
+                        p.generation = self.generation; // not started: it will use the new one
+                    }
                 }
                 self.rate = rate_bytes_per_s.clamp(1, self.state.config.max_session_rate);
                 Ok(None)
@@ -242,39 +262,54 @@ impl Session {
         } else {
             None
         };
+        self.want = place;
+        // A replaced observer's wait counts in the one that replaces it.
+        let (arrived, updates) = match self.pending.take() {
+            Some(p) => (p.arrived, p.updates + 1),
+            None => (arrived, 1),
+        };
         if place.is_some() && place == self.place {
-            self.pending = None;
-            m.update(0.0);
+            m.update(arrived.elapsed().as_secs_f64(), updates);
             return None;
         }
         if let Some(p) = place {
             let key = ShareKey::new(p, self.policy_bytes.clone());
             if let Some(list) = self.state.prefetcher.shared_cached(&key) {
-                self.pending = None;
-                return self.on_list(Ok(list), place, arrived);
+                m.update(arrived.elapsed().as_secs_f64(), updates);
+                return self.take_list(list, place);
             }
         }
-        self.pending = Some((obs, place, arrived));
+        self.pending = Some(Pending {
+            obs,
+            place,
+            arrived,
+            updates,
+            generation: self.generation,
+        });
         None
     }
 
-    /// Takes a need list; reports queued items whose need vanished. A computation stopped by
-    /// its deadline keeps the previous list.
-    fn on_list(
-        &mut self,
-        list: Result<Arc<NeedList>, Error>,
-        place: Option<SharePlace>,
-        arrived: Instant,
-    ) -> Option<Message> {
-        let list = match list {
-            Ok(l) => l,
-            Err(e) if e.status() == StatusCode::SERVICE_UNAVAILABLE => return None,
-            Err(e) => return Some(control(&StreamServer::Error(e.to_api()))),
-        };
+    /// A computation finished: its list is taken unless it is stale (another place is wanted
+    /// now, or the policy changed); past its deadline the previous list stays.
+    fn on_computed(&mut self, list: Result<Arc<NeedList>, Error>, p: Pending) -> Option<Message> {
+        self.state
+            .metrics
+            .update(p.arrived.elapsed().as_secs_f64(), p.updates);
+        let stale = p.generation != self.generation || (p.place.is_some() && p.place != self.want);
+        match list {
+            Ok(_) if stale => None,
+            Ok(l) => self.take_list(l, p.place),
+            Err(e) if e.status() == StatusCode::SERVICE_UNAVAILABLE => None,
+            Err(e) => Some(control(&StreamServer::Error(e.to_api()))),
+        }
+    }
+
+    /// Puts a need list in place; reports queued items whose need vanished.
+    fn take_list(&mut self, list: Arc<NeedList>, place: Option<SharePlace>) -> Option<Message> {
         let m = &self.state.metrics;
         m.prefetch_answers.fetch_add(1, Relaxed);
-        m.update(arrived.elapsed().as_secs_f64());
-        let dropped: Vec<u32> = self.list.items[self.cursor.min(self.list.items.len())..]
+        let end = self.list.fit.max(self.cursor).min(self.list.items.len());
+        let dropped: Vec<u32> = self.list.items[self.cursor.min(end)..end]
             .iter()
             .map(|i| i.segment)
             .filter(|s| !self.mirror.contains(s) && !list.segments.contains(s))
@@ -293,9 +328,12 @@ impl Session {
     /// that cannot be read), and the pacing clock advanced by its size.
     fn next_push(&mut self) -> Option<Message> {
         let item = loop {
-            let item = *self.list.items.get(self.cursor)?;
+            let i = self.cursor;
+            let item = *self.list.items.get(i)?;
             self.cursor += 1;
-            if !self.mirror.contains(&item.segment) {
+            // Past what the client's cache holds only the mandatory items go.
+            let wanted = i < self.list.fit || self.list.must[i];
+            if wanted && !self.mirror.contains(&item.segment) {
                 break item;
             }
         };

@@ -310,3 +310,37 @@ async fn an_observer_that_stays_in_its_cell_and_bucket_costs_no_computation() {
     assert!(text.contains("process_cpu_seconds_total "), "{text}");
     assert!(text.contains("portico_shared_hits_total 1\n"), "{text}");
 }
+
+#[tokio::test]
+async fn a_session_pushes_no_more_than_the_clients_cache_holds_but_all_it_must() {
+    let s = start(Config::default()).await;
+    let req = request(s.state.db());
+    let full = need_list(&s.state, &req.observer, &req.policy);
+    // A cache that holds a third of the list.
+    let third: u64 = full.items.iter().map(|i| i.bytes).sum::<u64>() / 3;
+    let policy = Policy {
+        cache_bytes: third,
+        ..req.policy
+    };
+    let list = need_list(&s.state, &req.observer, &policy);
+    assert!(
+        list.fit > 0 && list.fit < list.items.len(),
+        "{} of {}",
+        list.fit,
+        list.items.len()
+    );
+    let want: HashSet<u32> = (0..list.items.len())
+        .filter(|&i| i < list.fit || list.must[i])
+        .map(|i| list.items[i].segment)
+        .collect();
+    let mut ws = connect(&s.base).await;
+    hello(&mut ws, policy, 1 << 30).await;
+    ws.send(binary(&StreamClient::Observer(req.observer)))
+        .await
+        .unwrap();
+    let got = segments(&mut ws, want.len()).await;
+    let got: HashSet<u32> = got.iter().map(|&(id, _)| id).collect();
+    assert_eq!(got, want);
+    let quiet = next(&mut ws, Duration::from_millis(400)).await;
+    assert!(quiet.is_none(), "pushed past the cache: {quiet:?}");
+}

@@ -116,7 +116,7 @@ impl Prefetcher {
             }
         }
         let stab_items = if policy.impostors {
-            self.with_textures(stab_items, &cands, range.eye)
+            self.with_textures(stab_items, &cands, &range.eyes)
         } else {
             stab_items
         };

@@ -78,6 +78,9 @@ pub struct Prefetcher {
     graph: Option<CellGraph>,
     stabs: Vec<OnceLock<Arc<StabList>>>,
     bounds: Vec<Aabb>,
+    /// Per segment: the bytes it occupies in a client's cache (decoded geometry, else its
+    /// length).
+    decoded: Vec<u64>,
     shared: shared::SharedAnswers,
 }
 
@@ -106,11 +109,18 @@ impl Prefetcher {
         let graph = db.cell_graph()?;
         let n = graph.as_ref().map_or(0, |g| g.cells.len());
         let bounds = db.header().instances.iter().map(|i| i.bounds).collect();
+        let mut decoded: Vec<u64> = db.segments().iter().map(|e| e.length).collect();
+        for (seg, plain) in db.header().decoded_sizes() {
+            if let Some(d) = decoded.get_mut(seg as usize) {
+                *d = (*d).max(plain);
+            }
+        }
         Ok(Prefetcher {
             db,
             graph,
             stabs: (0..n).map(|_| OnceLock::new()).collect(),
             bounds,
+            decoded,
             shared: shared::SharedAnswers::new(shared::DEFAULT_CACHE_BYTES),
         })
     }
@@ -202,18 +212,38 @@ impl Prefetcher {
         let mut list = NeedList::ordered(stab_items, cands);
         list.range_cells = ranged;
         list.lookahead_cells = lookahead_cells;
+        self.fit_cache(&mut list, policy.cache_bytes);
         Ok(list)
+    }
+
+    /// Sets [`NeedList::fit`] for a cache of `cache_bytes`.
+    fn fit_cache(&self, list: &mut NeedList, cache_bytes: u64) {
+        let mut used = 0u64;
+        list.fit = list
+            .items
+            .iter()
+            .position(|i| {
+                used += self
+                    .decoded
+                    .get(i.segment as usize)
+                    .copied()
+                    .unwrap_or(i.bytes);
+                used > cache_bytes
+            })
+            .unwrap_or(list.items.len());
     }
 
     /// Appends the textured boxes of the clusters above the lookahead objects (the objects in
     /// view first, then by frames until visible): a cluster's impostor comes before any
     /// object's geometry, so the coarse view of a whole wing arrives before its furniture
-    /// (Maciel & Shirley 1995). Clusters around the eye are left out: no box can stand in for them.
+    /// (Maciel & Shirley 1995). Clusters around the eye are left out: no box can stand in for
+    /// them. `eyes` is where the eye may be (a point, or a shared range's cell): a cluster is
+    /// left out only when it holds all of it.
     fn with_textures(
         &self,
         mut items: Vec<NeedItem>,
         cands: &[Candidate],
-        eye: glam::Vec3,
+        eyes: &Aabb,
     ) -> Vec<NeedItem> {
         let Some(h) = &self.db.header().hierarchy else {
             return items;
@@ -231,8 +261,7 @@ impl Prefetcher {
                 if !seen.insert(node) {
                     break;
                 }
-                let around_eye =
-                    (0..3).all(|k| n.bounds.min[k] <= eye[k] && eye[k] <= n.bounds.max[k]);
+                let around_eye = n.bounds.contains_box(eyes);
                 if n.texture != u32::MAX && !around_eye {
                     let bytes = self.segment_bytes(n.texture);
                     items.push(need(n.texture, NeedKind::Texture, 0, bytes, c.frames));
@@ -290,6 +319,11 @@ pub struct NeedList {
     pub lookahead_objects: u32,
     /// Wire bytes of the whole lookahead set.
     pub lookahead_bytes: u64,
+    /// The items before this fit the client's cache together (decoded sizes, from the top of
+    /// the list); a session pushes no further but for mandatory items, so what it pushes is
+    /// never more than the client can keep (pushing past it would only be evicted and asked
+    /// for again).
+    pub fit: usize,
 }
 
 impl NeedList {

@@ -38,6 +38,8 @@ pub struct ObserverRange {
     pub spread: f32,
     /// The cell Dijkstra starts from (`None`: the cell holding the eye).
     pub start: Option<u32>,
+    /// Where the eye may be: the eye itself, or the shared cell's box.
+    pub eyes: Aabb,
     /// With `spread`, the cone every view ray of the shared observers lies in (the direction
     /// range cull's test); `None` when it covers every direction.
     pub ray_cone: Option<Frustum>,
@@ -73,6 +75,10 @@ impl ObserverRange {
             slack: 0.0,
             spread: 0.0,
             start: None,
+            eyes: Aabb {
+                min: eye.into(),
+                max: eye.into(),
+            },
             ray_cone: None,
         }
     }
@@ -99,9 +105,6 @@ impl ObserverRange {
         let depth = policy.depth_frames;
         let radius = step * depth as f32 + slack;
         let turn = obs.max_turn.max(0.0) * policy.frame_time_s.max(0.0) * depth as f32;
-        // The view pyramid's corner ray, whatever the roll: a circular bound on its directions.
-        let (tx, ty) = (obs.half_fov_x.max(0.0).tan(), obs.half_fov_y.max(0.0).tan());
-        let corner = (tx * tx + ty * ty).sqrt().atan();
         let up = if dir.y.abs() < 0.9 { Vec3::Y } else { Vec3::X };
         let limit = std::f32::consts::FRAC_PI_2 - 0.02;
         let cone = |half: f32, reach: f32| {
@@ -110,16 +113,30 @@ impl ObserverRange {
                 Frustum::new(centre - dir * back, dir, up, half, half)
             })
         };
+        // One observer's range frustum (see `new`): half-angles widened by the turn, its apex
+        // stepped back by `r / sin(min)`. Whatever its roll, its rays are within the corner
+        // angle of its axis, and its apex within `slack + r / sin(min)` of the cell's centre:
+        // a cone opened by the corner angle plus the spread, stepped back that far, holds it.
+        let (hx, hy) = (obs.half_fov_x + turn, obs.half_fov_y + turn);
+        let frustum = if hx > 0.0 && hy > 0.0 && hx < limit && hy < limit {
+            let (tx, ty) = (hx.tan(), hy.tan());
+            let corner = (tx * tx + ty * ty).sqrt().atan();
+            let back = step * depth as f32 / hx.min(hy).sin();
+            cone(corner + spread, slack + back)
+        } else {
+            None // the one observer keeps a half-space, which no cone holds
+        };
         ObserverRange {
             eye: centre,
             dir,
             step,
             depth,
             radius,
-            frustum: cone(corner + turn + spread, radius),
+            frustum,
             slack,
             spread,
             start: Some(cell),
+            eyes: *bounds,
             ray_cone: cone(spread, slack),
         }
     }

@@ -129,14 +129,13 @@ impl SharedAnswers {
     fn put(&self, key: ShareKey, list: Arc<NeedList>) {
         let capacity = self.capacity.load(Relaxed);
         let bytes = entry_bytes(&key, &list);
-        if bytes > capacity {
-            return;
-        }
         let mut g = self.lists.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(old) = g.0.put(key.clone(), list) {
-            g.1 -= entry_bytes(&key, &old);
+        if bytes <= capacity {
+            if let Some(old) = g.0.put(key.clone(), list) {
+                g.1 -= entry_bytes(&key, &old);
+            }
+            g.1 += bytes;
         }
-        g.1 += bytes;
         while g.1 > capacity {
             let Some((k, l)) = g.0.pop_lru() else { break };
             g.1 -= entry_bytes(&k, &l);
@@ -149,11 +148,15 @@ fn entry_bytes(key: &ShareKey, list: &NeedList) -> usize {
 }
 
 impl Prefetcher {
-    /// Where `obs` stands for sharing; `None` without cells (or without a live cell), where
-    /// answers are computed per observer. Cheap: a k-D descent and an `atan2`.
+    /// Where `obs` stands for sharing; `None` without cells or with the eye outside every live
+    /// cell, where answers are computed per observer. Cheap: a k-D descent and an `atan2`.
     pub fn share_place(&self, obs: &Observer) -> Option<SharePlace> {
         let graph = self.graph.as_ref()?;
-        let cell = super::range::start_cell(graph, Vec3::from(obs.eye))?;
+        // Only an eye inside its cell: the widened range holds the observers in the cell, not
+        // one in a wall or outside the model (that one gets its own answer).
+        let cell = graph
+            .locate(Vec3::from(obs.eye))
+            .filter(|&c| graph.cells[c as usize].live)?;
         Some(SharePlace {
             cell,
             bucket: direction_bucket(Vec3::from(obs.dir)).0,
@@ -203,23 +206,44 @@ impl Prefetcher {
                 .unwrap_or_else(|e| e.into_inner());
             c.entry(key.clone()).or_default().clone()
         };
-        let done = {
-            let _turn = gate.lock().unwrap_or_else(|e| e.into_inner());
-            // Someone may have computed it while this waited.
-            match self.shared_cached(key) {
-                Some(l) => Ok(l),
-                None => self.compute_shared(key, obs, policy, budget),
-            }
-        };
+        let done = self.compute_once(&gate, key, obs, policy, budget);
         let mut c = self
             .shared
             .computing
             .lock()
             .unwrap_or_else(|e| e.into_inner());
-        if c.get(key).is_some_and(|g| Arc::ptr_eq(g, &gate)) && Arc::strong_count(&gate) <= 2 {
+        drop(gate);
+        // The last one through (every holder drops its clone under this lock) clears the gate.
+        if c.get(key).is_some_and(|g| Arc::strong_count(g) == 1) {
             c.remove(key);
         }
         done
+    }
+
+    /// Takes the gate's turn, waiting within `budget` (so a waiter never holds a compute slot
+    /// past its deadline), then computes the list unless whoever went first already did.
+    fn compute_once(
+        &self,
+        gate: &Mutex<()>,
+        key: &ShareKey,
+        obs: &Observer,
+        policy: &Policy,
+        budget: &Budget,
+    ) -> Result<Arc<NeedList>> {
+        let _turn = loop {
+            match gate.try_lock() {
+                Ok(g) => break g,
+                Err(std::sync::TryLockError::Poisoned(p)) => break p.into_inner(),
+                Err(std::sync::TryLockError::WouldBlock) => {
+                    budget.check()?;
+                    std::thread::sleep(std::time::Duration::from_micros(200));
+                }
+            }
+        };
+        match self.shared_cached(key) {
+            Some(l) => Ok(l),
+            None => self.compute_shared(key, obs, policy, budget),
+        }
     }
 
     fn compute_shared(
@@ -244,6 +268,7 @@ impl Prefetcher {
         let mut list = NeedList::ordered(stabs, cands);
         list.range_cells = ranged;
         list.lookahead_cells = cells;
+        self.fit_cache(&mut list, policy.cache_bytes);
         let list = Arc::new(list);
         self.shared.put(key.clone(), list.clone());
         Ok(list)
@@ -267,7 +292,11 @@ impl Prefetcher {
         if !graph.cells[cell as usize].live {
             return Ok(HashSet::new());
         }
-        let (tx, ty) = (obs.half_fov_x.max(0.0).tan(), obs.half_fov_y.max(0.0).tan());
+        // The one observer's view (`visible_now`) clamps its half-angles the same way.
+        let (tx, ty) = (
+            obs.half_fov_x.clamp(0.01, 1.55).tan(),
+            obs.half_fov_y.clamp(0.01, 1.55).tan(),
+        );
         let half = (tx * tx + ty * ty).sqrt().atan() + range.spread;
         let cone = (half < PI / 2.0 - 0.02).then(|| {
             let up = if range.dir.y.abs() < 0.9 {

@@ -32,3 +32,19 @@ pub fn tiny_prefetcher(
     let db = std::sync::Arc::new(portico_data::Database::open(&out).unwrap());
     portico_data::prefetch::Prefetcher::new(db).unwrap()
 }
+
+/// A painter that paints nothing real: every cluster gets an "atlas" of a few bytes (the
+/// prefetcher never decodes it) and grey faces, so the database has textured boxes.
+#[allow(dead_code)] // not every test crate paints
+pub struct FakePainter;
+
+impl portico_data::hierarchy::ImpostorPainter for FakePainter {
+    fn paint(
+        &mut self,
+        _: &[portico_data::hierarchy::PaintItem<'_>],
+        _: &portico_data::geometry::Aabb,
+        _: u32,
+    ) -> Result<(Vec<u8>, [[f32; 4]; 6]), String> {
+        Ok((b"\x89PNG fake atlas".to_vec(), [[0.5, 0.5, 0.5, 1.0]; 6]))
+    }
+}
