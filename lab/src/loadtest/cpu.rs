@@ -3,9 +3,10 @@
 //! - **in-process** (the server listens on a socket this process holds, as in `portico demo`
 //!   and the tests): `/proc/self/stat` utime+stime of the whole process minus that of the load
 //!   tester's own threads (named `portico-lt`), in clock ticks of 1/100 s (Linux USER_HZ);
-//! - **metrics**: otherwise, the delta of the server's `portico_request_seconds_sum` over the
-//!   data routes on `/metrics` — seconds spent inside request handlers (wall time, an upper
-//!   bound on their CPU time on an idle server).
+//! - **metrics**: otherwise, the delta of the server's own `process_cpu_seconds_total` on
+//!   `/metrics` (its CPU time, whatever it spent it on); a server too old to report it gives
+//!   `portico_request_seconds_sum` over the data routes instead — seconds spent inside request
+//!   handlers (wall time, an upper bound on their CPU time on an idle server).
 
 use std::collections::HashSet;
 
@@ -31,6 +32,7 @@ pub struct Sample {
     process_s: Option<f64>,
     own_s: Option<f64>,
     handler_s: Option<f64>,
+    remote_cpu_s: Option<f64>,
 }
 
 /// Server CPU between two readings.
@@ -58,16 +60,21 @@ impl Probe {
         if self.in_process {
             "in-process: /proc/self/stat utime+stime minus the load tester's own threads (CPU s)"
         } else {
-            "remote: /metrics portico_request_seconds_sum delta over data routes (handler wall s)"
+            "remote: /metrics process_cpu_seconds_total delta (the server's CPU s; from a server \
+             without it, portico_request_seconds_sum over data routes: handler wall s)"
         }
     }
 
     /// Reads the counters now.
     pub async fn sample(&self) -> Sample {
+        let page = self.page().await;
         Sample {
             process_s: self.in_process.then(process_cpu_s).flatten(),
             own_s: self.in_process.then(own_threads_cpu_s).flatten(),
-            handler_s: self.handler_s().await,
+            handler_s: page.as_deref().and_then(handler_seconds),
+            remote_cpu_s: page
+                .as_deref()
+                .and_then(|t| metric(t, "process_cpu_seconds_total")),
         }
     }
 
@@ -80,7 +87,7 @@ impl Probe {
                 .zip(delta(before.own_s, after.own_s))
                 .map(|(all, own)| (all - own).max(0.0))
         } else {
-            handler_s
+            delta(before.remote_cpu_s, after.remote_cpu_s).or(handler_s)
         };
         Usage {
             server_s,
@@ -88,13 +95,12 @@ impl Probe {
         }
     }
 
-    async fn handler_s(&self) -> Option<f64> {
+    async fn page(&self) -> Option<String> {
         let mut req = self.http.get(&self.metrics_url);
         if let Some(t) = &self.token {
             req = req.bearer_auth(t);
         }
-        let text = req.send().await.ok()?.text().await.ok()?;
-        handler_seconds(&text)
+        req.send().await.ok()?.text().await.ok()
     }
 }
 
@@ -117,6 +123,13 @@ pub fn handler_seconds(text: &str) -> Option<f64> {
         }
     }
     found.then_some(sum)
+}
+
+/// The value of an unlabelled metric in a Prometheus text page.
+pub fn metric(text: &str, name: &str) -> Option<f64> {
+    text.lines()
+        .find_map(|l| l.strip_prefix(name)?.strip_prefix(' '))
+        .and_then(|v| v.trim().parse().ok())
 }
 
 /// utime+stime (seconds) from the text of a `/proc/.../stat` file.
@@ -213,6 +226,9 @@ mod tests {
                     portico_request_seconds_sum{route=\"segment\"} 0.25\n";
         assert_eq!(handler_seconds(text), Some(1.75));
         assert_eq!(handler_seconds("nothing"), None);
+        let page = "process_cpu_seconds_total_x 1\nprocess_cpu_seconds_total 2.5\n";
+        assert_eq!(metric(page, "process_cpu_seconds_total"), Some(2.5));
+        assert_eq!(metric(page, "missing"), None);
         let table = "  sl  local_address rem_address   st tx_queue rx_queue tr tm->when retrnsmt   uid  timeout inode\n   0: 0100007F:1F4E 00000000:0000 0A 00000000:00000000 00:00000000 00000000     0        0 4242 1\n   1: 0100007F:1F4E 0100007F:9999 01 00000000:00000000 00:00000000 00000000     0        0 4343 1\n";
         assert_eq!(listening_inodes(table, 8014), vec!["4242".to_string()]);
         assert!(listening_inodes(table, 80).is_empty());
@@ -228,5 +244,24 @@ mod tests {
         drop(l);
         assert!(!listens_here("http://127.0.0.1:1"));
         assert!(!listens_here("not a url"));
+    }
+
+    #[test]
+    fn a_remote_servers_own_cpu_time_wins_over_its_handler_time() {
+        let probe = Probe::new("http://127.0.0.1:1", None);
+        assert!(!probe.in_process);
+        let at = |handler: f64, cpu: Option<f64>| Sample {
+            handler_s: Some(handler),
+            remote_cpu_s: cpu,
+            ..Sample::default()
+        };
+        let u = probe.usage(at(1.0, Some(10.0)), at(3.0, Some(10.5)));
+        assert_eq!(u.server_s, Some(0.5));
+        assert_eq!(u.handler_s, Some(2.0));
+        // A server without process_cpu_seconds_total: handler time, as before.
+        assert_eq!(
+            probe.usage(at(1.0, None), at(3.0, None)).server_s,
+            Some(2.0)
+        );
     }
 }
