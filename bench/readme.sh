@@ -72,7 +72,7 @@ step loadtest --path tour.json --stress 1,16,64 -o st-closed --closed-loop
 step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1kbit -o ss
 step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1mbit -o ss-push
 serve soda.portico --exact-answers
-step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1kbit -o ss-exact
+step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1kbit -o ss-exact --baseline ss
 
 serve soda.flat.portico
 step walk --server http://127.0.0.1:7878 --path tour.json --cache-mb 64 --max-frames 2400 -o w64

@@ -160,6 +160,38 @@ fn loadtest_stress_and_bench_run_from_the_command_line() {
         assert!(l["ping_s"]["max"].as_f64().unwrap() > 0.0, "{l}");
     }
     assert!(ss.join("scaling.png").is_file());
+    assert!(
+        levels.iter().all(|l| l["shared_answers"] == true),
+        "{stress}"
+    );
+    // Drawn against an earlier run; an HTTP stress result is refused as a baseline.
+    let again = dir.path().join("stream-stress-2");
+    let base = [
+        "loadtest",
+        "--server",
+        &server.1,
+        "--path-kind",
+        "tour",
+        "--stress",
+        "2",
+    ];
+    let tail = [
+        "--stream",
+        "--stress-seconds",
+        "0.5",
+        "-o",
+        s(&again),
+        "--baseline",
+    ];
+    ok(&[&base[..], &tail[..], &[s(&ss)]].concat());
+    assert!(again.join("scaling.png").is_file());
+    let refused = common::portico(&[&base[..], &tail[..], &[s(&st)]].concat());
+    assert!(!refused.status.success());
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        err.contains("--baseline") && err.contains("not a stream stress run"),
+        "{err}"
+    );
 
     let b = dir.path().join("bench");
     ok(&[

@@ -1,7 +1,7 @@
 //! Per-frame statistics (Funkhouser Table 3.3) and their summary (RRB §5.2: mean, min, max,
 //! mean absolute deviation, standard deviation, percentiles, frames over budget).
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::Path;
 
@@ -49,7 +49,7 @@ pub struct FrameRow {
 }
 
 /// Summary statistics of a series.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Series {
     /// Mean.
     pub mean: f64,

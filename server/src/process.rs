@@ -34,8 +34,9 @@ pub fn resident_bytes() -> Option<u64> {
     Some(kb * 1024)
 }
 
-/// Appends the process and shared-cache lines in Prometheus text.
-pub fn render(out: &mut String, shared: &SharedAnswers) {
+/// Appends the process and shared-cache lines in Prometheus text; `sharing` says whether
+/// stream sessions share need lists (`portico serve` without `--exact-answers`).
+pub fn render(out: &mut String, shared: &SharedAnswers, sharing: bool) {
     let mut line = |name: &str, kind: &str, help: &str, v: f64| {
         let _ = writeln!(
             out,
@@ -58,6 +59,12 @@ pub fn render(out: &mut String, shared: &SharedAnswers) {
             b as f64,
         );
     }
+    line(
+        "portico_shared_answers",
+        "gauge",
+        "1 when stream sessions share need lists, 0 when each observer gets its own.",
+        f64::from(u8::from(sharing)),
+    );
     let (lists, bytes) = shared.usage();
     line(
         "portico_shared_hits_total",
@@ -105,8 +112,9 @@ mod tests {
         let rss = resident_bytes().unwrap();
         assert!((1 << 20..1 << 36).contains(&rss), "{rss}");
         let mut s = String::new();
-        render(&mut s, &SharedAnswers::new(1 << 20));
+        render(&mut s, &SharedAnswers::new(1 << 20), true);
         assert!(s.contains("process_cpu_seconds_total "));
         assert!(s.contains("portico_shared_misses_total 0"));
+        assert!(s.contains("portico_shared_answers 1\n"));
     }
 }

@@ -39,7 +39,11 @@ pub async fn healthz(State(s): Shared) -> impl IntoResponse {
 /// `GET /metrics` (Prometheus text).
 pub async fn metrics(State(s): Shared) -> impl IntoResponse {
     let mut text = s.metrics.render();
-    crate::process::render(&mut text, s.prefetcher.shared_answers());
+    crate::process::render(
+        &mut text,
+        s.prefetcher.shared_answers(),
+        s.config.shared_answers,
+    );
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text)
 }
 

@@ -9,6 +9,7 @@ use crate::progress::Bars;
 use anyhow::{Context, Result};
 use portico_client::policy::{parse_policy, policy_spec};
 use portico_lab::loadtest::stress::{StressConfig, level};
+use portico_lab::loadtest::stress_plot;
 use portico_lab::loadtest::stress_stream::{self, StreamStressConfig};
 use portico_lab::loadtest::{Link, LoadtestConfig, LoadtestSummary, grid, run as run_loadtest};
 use portico_protocol::Policy;
@@ -78,6 +79,10 @@ pub struct Args {
     /// DIR/scaling.png.
     #[arg(long, requires = "stress")]
     stream: bool,
+    /// With --stream: a directory of an earlier stream stress run (its stress.json) to draw in
+    /// the same scaling plot, e.g. the same levels against `portico serve --exact-answers`.
+    #[arg(long, requires = "stream", value_name = "DIR")]
+    baseline: Option<PathBuf>,
 }
 
 /// The policies to run: one from `--policy`, or the `--sweep` grid on top of it.
@@ -342,7 +347,18 @@ fn stress_stream(
     std::fs::write(&out, serde_json::to_vec_pretty(&json)?)
         .with_context(|| format!("writing {}", out.display()))?;
     let plot = a.out.join("scaling.png");
-    portico_lab::loadtest::stress_plot::scaling(&plot, &levels)?;
+    let baseline = match &a.baseline {
+        Some(dir) => Some(stress_stream::read_run(dir).context("--baseline")?),
+        None => None,
+    };
+    let mut runs = vec![(stress_plot::run_name(&levels), &levels[..])];
+    if let Some(b) = &baseline {
+        runs.push((stress_plot::run_name(b), &b[..]));
+        if runs[0].0 == runs[1].0 {
+            runs = vec![("this run", &levels[..]), ("baseline", &b[..])];
+        }
+    }
+    stress_plot::scaling(&plot, &runs)?;
     println!("  wrote {} and {}", out.display(), plot.display());
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! The stream stress test's scaling plot (plotters, PNG): against the number of clients (log
 //! scale), the server's CPU per observer update on the left, and the update latency inside the
-//! server and the ping round trip at the clients (p99) on the right.
+//! server and the ping round trip at the clients (p99) on the right; one set of lines per run
+//! (this run, and a baseline run's levels when given: before and after in one picture).
 
 use super::stress_stream::StreamLevel;
 use crate::style::{PALETTE, fonts_available};
@@ -14,44 +15,46 @@ const SIZE: (u32, u32) = (1200, 520);
 
 type Points = Vec<(f64, f64)>;
 
-/// Writes the plot to `path`; whether it has text (see [`crate::style`]).
-pub fn scaling(path: &Path, levels: &[StreamLevel]) -> Result<bool> {
+/// The name of a run in the legend: what its server said about sharing.
+pub fn run_name(levels: &[StreamLevel]) -> &'static str {
+    match levels.first().and_then(|l| l.shared_answers) {
+        Some(true) => "shared lists",
+        Some(false) => "exact lists",
+        None => "server",
+    }
+}
+
+/// Writes the plot of `runs` (a name and its levels each) to `path`; whether it has text (see
+/// [`crate::style`]).
+pub fn scaling(path: &Path, runs: &[(&str, &[StreamLevel])]) -> Result<bool> {
     let text = fonts_available();
     let err = |e: &dyn std::fmt::Display| anyhow!("plotting {}: {e}", path.display());
     let root = BitMapBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
     let (left, right) = root.split_horizontally(SIZE.0 / 2);
-    let at = |f: &dyn Fn(&StreamLevel) -> f64| -> Points {
+    let at = |levels: &[StreamLevel], f: &dyn Fn(&StreamLevel) -> f64| -> Points {
         levels
             .iter()
             .map(|l| (l.clients.max(1) as f64, f(l)))
             .collect()
     };
-    panel(
-        &left,
-        "Server CPU per observer update",
-        "µs",
-        &[("server CPU / update", at(&|l| l.cpu_per_update_ms * 1e3))],
-        text,
-    )
-    .map_err(|e| err(&e))?;
-    panel(
-        &right,
-        "Update latency, p99",
-        "ms",
-        &[
-            (
-                "in the server (histogram bound)",
-                at(&|l| l.update_p99_s * 1e3),
-            ),
-            (
-                "ping after the update, at the client",
-                at(&|l| l.ping_s.p99 * 1e3),
-            ),
-        ],
-        text,
-    )
-    .map_err(|e| err(&e))?;
+    let cpu: Vec<(String, Points)> = runs
+        .iter()
+        .map(|(name, l)| (name.to_string(), at(l, &|l| l.cpu_per_update_ms * 1e3)))
+        .collect();
+    let mut latency = Vec::new();
+    for (name, l) in runs {
+        latency.push((
+            format!("{name}: in the server (bucket bound)"),
+            at(l, &|l| l.update_p99_s * 1e3),
+        ));
+        latency.push((
+            format!("{name}: ping after the update"),
+            at(l, &|l| l.ping_s.p99 * 1e3),
+        ));
+    }
+    panel(&left, "Server CPU per observer update", "µs", &cpu, text).map_err(|e| err(&e))?;
+    panel(&right, "Update latency, p99", "ms", &latency, text).map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;
     Ok(text)
 }
@@ -60,7 +63,7 @@ fn panel(
     area: &DrawingArea<BitMapBackend<'_>, Shift>,
     title: &str,
     y_desc: &str,
-    series: &[(&str, Points)],
+    series: &[(String, Points)],
     text: bool,
 ) -> Result<(), Box<dyn std::error::Error>> {
     let xs = series.iter().flat_map(|s| s.1.iter().map(|p| p.0));
@@ -93,7 +96,7 @@ fn panel(
         let pts: Points = pts.iter().copied().filter(|p| p.1.is_finite()).collect();
         let drawn = chart.draw_series(LineSeries::new(pts.clone(), color.stroke_width(3)))?;
         if text {
-            drawn.label(*name).legend(move |(x, y)| {
+            drawn.label(name.as_str()).legend(move |(x, y)| {
                 PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3))
             });
         }
@@ -109,4 +112,52 @@ fn panel(
             .draw()?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use portico_client::stats::Series;
+
+    fn level(clients: usize, shared: bool, cpu_ms: f64) -> StreamLevel {
+        StreamLevel {
+            clients,
+            shared_answers: Some(shared),
+            connected: clients,
+            refused: 0,
+            updates: 100,
+            updates_per_s: 20.0 * clients as f64,
+            server_cpu_s: 1.0,
+            cpu_per_update_ms: cpu_ms,
+            server_cores: 0.5,
+            update_p50_s: 1e-4,
+            update_p99_s: if shared { 1e-4 } else { 0.5 },
+            ping_s: Series::of(&[0.001, 0.002]),
+            lists_computed: 1,
+            lists_taken: 2,
+            rss_open: 0.0,
+            rss_idle: 0.0,
+            pushed_bytes: 0,
+        }
+    }
+
+    #[test]
+    fn a_run_and_its_baseline_draw_in_one_picture() {
+        let dir = tempfile::tempdir().unwrap();
+        let after = [level(1, true, 0.1), level(1000, true, 0.03)];
+        let before = [level(1, false, 1.0), level(1000, false, 0.06)];
+        assert_eq!(run_name(&after), "shared lists");
+        assert_eq!(run_name(&before), "exact lists");
+        let p = dir.path().join("scaling.png");
+        scaling(&p, &[("shared lists", &after), ("exact lists", &before)]).unwrap();
+        let img = image::open(&p).unwrap().to_rgb8();
+        assert_eq!((img.width(), img.height()), SIZE);
+        // Two runs' colours are drawn (the first two palette entries after black).
+        for c in [PALETTE[1], PALETTE[2]] {
+            assert!(
+                img.pixels().any(|px| px.0 == [c.0, c.1, c.2]),
+                "no line in {c:?}"
+            );
+        }
+    }
 }

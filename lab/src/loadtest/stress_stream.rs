@@ -15,7 +15,7 @@ use futures_util::{SinkExt, StreamExt};
 use portico_client::stats::Series;
 use portico_data::path::CameraPath;
 use portico_protocol::{PROTOCOL_VERSION, Policy, StreamClient};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use std::time::{Duration, Instant};
@@ -46,10 +46,13 @@ pub struct StreamStressConfig {
 }
 
 /// What one level measured.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct StreamLevel {
     /// Sessions asked for.
     pub clients: usize,
+    /// Whether the server shared need lists (`None`: it did not say).
+    #[serde(default)]
+    pub shared_answers: Option<bool>,
     /// Sessions the server accepted.
     pub connected: usize,
     /// Sessions refused (503 past capacity) or failed.
@@ -97,6 +100,8 @@ pub struct ServerSample {
     pub misses: f64,
     /// `portico_prefetch_answers_total`.
     pub answers: f64,
+    /// `portico_shared_answers`: whether the server shares need lists (`None`: not said).
+    pub shared: Option<bool>,
     /// `portico_stream_update_seconds_bucket`: (upper bound, cumulative count).
     pub buckets: Vec<(f64, f64)>,
 }
@@ -120,6 +125,7 @@ impl ServerSample {
                 "portico_stream_updates_total" => s.updates = v,
                 "portico_shared_misses_total" => s.misses = v,
                 "portico_prefetch_answers_total" => s.answers = v,
+                "portico_shared_answers" => s.shared = Some(v > 0.0),
                 _ => {
                     if let Some(le) = name
                         .strip_prefix("portico_stream_update_seconds_bucket{le=\"")
@@ -226,6 +232,7 @@ pub async fn level(cfg: &StreamStressConfig, clients: usize) -> Result<StreamLev
     let pings = std::mem::take(&mut *shared.pings.lock().unwrap_or_else(|e| e.into_inner()));
     Ok(StreamLevel {
         clients,
+        shared_answers: after.shared,
         connected,
         refused: clients - connected,
         updates: updates as u64,
@@ -346,6 +353,22 @@ pub fn memory_per_session(levels: &[StreamLevel]) -> Vec<f64> {
     out
 }
 
+/// The levels of an earlier `--stress … --stream` run, from `dir/stress.json`.
+pub fn read_run(dir: &std::path::Path) -> Result<Vec<StreamLevel>> {
+    let path = dir.join("stress.json");
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let run: serde_json::Value =
+        serde_json::from_str(&text).with_context(|| format!("{} is not JSON", path.display()))?;
+    anyhow::ensure!(
+        run["transport"] == "stream",
+        "{} is not a stream stress run (its transport is not \"stream\")",
+        path.display()
+    );
+    serde_json::from_value(run["levels"].clone())
+        .with_context(|| format!("{}: its levels do not read", path.display()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -377,6 +400,7 @@ portico_stream_update_seconds_bucket{le=\"+Inf\"} 40\n";
     fn memory_per_session_is_growth_over_the_sessions_added() {
         let level = |connected: usize, idle: f64, open: f64| StreamLevel {
             clients: connected,
+            shared_answers: Some(true),
             connected,
             refused: 0,
             updates: 0,
