@@ -26,6 +26,20 @@ fn with_impostors() -> &'static Prefetcher {
     })
 }
 
+/// A walker's observer (1.5 m/s, a 69° by 52° view) at `eye` looking along `dir`.
+fn observer(eye: Vec3, dir: Vec3, max_turn: f32) -> Observer {
+    Observer {
+        eye: eye.into(),
+        dir: dir.into(),
+        up: [0.0, 1.0, 0.0],
+        velocity: [0.0; 3],
+        half_fov_x: 0.6,
+        half_fov_y: 0.45,
+        max_speed: 1.5,
+        max_turn,
+    }
+}
+
 /// Observers at several points of every live cell (corners included), looking in eight
 /// directions, some tilted, turning at 0, 0.3 or 1 rad/s (the slower ones keep a range frustum:
 /// at 1 rad/s over 16 frames it opens past a half-space).
@@ -39,16 +53,7 @@ fn observers(p: &Prefetcher) -> Vec<Observer> {
             let eye = lo + (hi - lo) * at;
             let a = (i * 4 + k) as f32 * 0.785;
             let dir = Vec3::new(a.cos(), (k as f32 - 1.5) * 0.2, a.sin()).normalize();
-            out.push(Observer {
-                eye: eye.into(),
-                dir: dir.into(),
-                up: [0.0, 1.0, 0.0],
-                velocity: [0.0; 3],
-                half_fov_x: 0.6,
-                half_fov_y: 0.45,
-                max_speed: 1.5,
-                max_turn: [0.0, 0.3, 1.0][(i + k) % 3],
-            });
+            out.push(observer(eye, dir, [0.0, 0.3, 1.0][(i + k) % 3]));
         }
     }
     out
@@ -202,16 +207,7 @@ fn one_computation_serves_everyone_in_the_cell_and_bucket() {
         .find(|(_, c)| c.live && c.bounds.max[0] - c.bounds.min[0] > 1.0)
         .unwrap();
     let (lo, hi) = (Vec3::from(c.bounds.min), Vec3::from(c.bounds.max));
-    let at = |t: f32, dir: Vec3| Observer {
-        eye: (lo + (hi - lo) * Vec3::new(t, 0.5, t)).into(),
-        dir: dir.into(),
-        up: [0.0, 1.0, 0.0],
-        velocity: [0.0; 3],
-        half_fov_x: 0.6,
-        half_fov_y: 0.45,
-        max_speed: 1.5,
-        max_turn: 1.0,
-    };
+    let at = |t: f32, dir: Vec3| observer(lo + (hi - lo) * Vec3::new(t, 0.5, t), dir, 1.0);
     let a = at(0.3, Vec3::new(1.0, 0.0, 0.05));
     let b = at(0.7, Vec3::new(1.0, 0.02, 0.08));
     let ka = p.share_key(&a, &policy).unwrap();

@@ -1,17 +1,16 @@
 //! Shared prefetch answers: one need list for every observer in the same cell looking the same
 //! way, computed once and kept in a cache bounded by memory.
 //!
-//! Funkhouser's lookahead (§5.2.2) depends on the observer only through the cells it can reach
-//! and the directions it can look in. Those are fixed by the eye cell and a direction bucket
-//! ([`direction_bucket`]): [`super::range::ObserverRange::for_cell`] makes one observer range
-//! that holds the range of every observer in the cell whose view lies in the bucket, so the
-//! need list computed from it is a superset of each one's (conservative, like the cells). What
-//! differs per client is only what it already holds: [`super::NeedList::cut`] takes that
-//! difference in one pass over the list.
+//! Funkhouser's lookahead (§5.2.2) depends on where the observer stands and where it looks.
+//! Fix only its eye cell and a direction bucket ([`direction_bucket`]), and
+//! [`super::range::ObserverRange::for_cell`] makes one observer range that holds the range of
+//! every observer in the cell whose view lies in the bucket, so the need list computed from it
+//! is a superset of each one's (conservative, like the cells; up to the cache bound where the
+//! lookahead stops). What differs per client is only what it already holds:
+//! [`super::NeedList::cut`] takes that difference in one pass over the list.
 //!
 //! So a server answers a crowd on one tour with a handful of computations, and a stream
-//! session computes nothing while its observer stays in its cell and bucket (§5.2's "only when
-//! the observer crosses a cell boundary").
+//! session computes nothing while its observer stays in its cell and bucket.
 
 use super::range::ObserverRange;
 use super::{Budget, NeedList, Prefetcher};
