@@ -1,12 +1,13 @@
 //! The stream stress test's scaling plot (plotters, PNG): against the number of clients (log
 //! scale), the server's CPU per observer update on the left, and the update latency inside the
-//! server and the ping round trip at the clients (p99) on the right; one set of lines per run
+//! server and the ping round trip at the clients (p99, log scale) on the right; one set of lines per run
 //! (this run, and a baseline run's levels when given: before and after in one picture).
 
 use super::stress_stream::StreamLevel;
 use crate::style::{PALETTE, fonts_available};
 use anyhow::{Result, anyhow};
 use plotters::coord::Shift;
+use plotters::coord::ranged1d::{AsRangedCoord, ValueFormatter};
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -14,6 +15,8 @@ use std::path::Path;
 const SIZE: (u32, u32) = (1200, 520);
 
 type Points = Vec<(f64, f64)>;
+/// A named line and its colour's index in [`PALETTE`].
+type Line = (String, Points, usize);
 
 /// The name of a run in the legend: what its server said about sharing.
 pub fn run_name(levels: &[StreamLevel]) -> &'static str {
@@ -38,42 +41,113 @@ pub fn scaling(path: &Path, runs: &[(&str, &[StreamLevel])]) -> Result<bool> {
             .map(|l| (l.clients.max(1) as f64, f(l)))
             .collect()
     };
-    let cpu: Vec<(String, Points)> = runs
+    // Run i draws in colour 2i+1 on both panels (its ping line in 2i+2), so a run is one
+    // colour across the picture.
+    let cpu: Vec<Line> = runs
         .iter()
-        .map(|(name, l)| (name.to_string(), at(l, &|l| l.cpu_per_update_ms * 1e3)))
+        .enumerate()
+        .map(|(i, (name, l))| {
+            (
+                name.to_string(),
+                at(l, &|l| l.cpu_per_update_ms * 1e3),
+                2 * i + 1,
+            )
+        })
         .collect();
     let mut latency = Vec::new();
-    for (name, l) in runs {
+    for (i, (name, l)) in runs.iter().enumerate() {
         latency.push((
             format!("{name}: in the server (bucket bound)"),
             at(l, &|l| l.update_p99_s * 1e3),
+            2 * i + 1,
         ));
         latency.push((
             format!("{name}: ping after the update"),
             at(l, &|l| l.ping_s.p99 * 1e3),
+            2 * i + 2,
         ));
     }
-    panel(&left, "Server CPU per observer update", "µs", &cpu, text).map_err(|e| err(&e))?;
-    panel(&right, "Update latency, p99", "ms", &latency, text).map_err(|e| err(&e))?;
+    panel(
+        &left,
+        "Server CPU per observer update",
+        "µs",
+        &cpu,
+        text,
+        false,
+    )
+    .map_err(|e| err(&e))?;
+    panel(
+        &right,
+        "Update latency, p99",
+        "ms (log scale)",
+        &latency,
+        text,
+        true,
+    )
+    .map_err(|e| err(&e))?;
     root.present().map_err(|e| err(&e))?;
     Ok(text)
 }
+
+/// Latencies under this (ms) are drawn at it: the log axis has no zero.
+const LATENCY_FLOOR_MS: f64 = 0.05;
 
 fn panel(
     area: &DrawingArea<BitMapBackend<'_>, Shift>,
     title: &str,
     y_desc: &str,
-    series: &[(String, Points)],
+    series: &[Line],
     text: bool,
+    log_y: bool,
 ) -> Result<(), Box<dyn std::error::Error>> {
-    let xs = series.iter().flat_map(|s| s.1.iter().map(|p| p.0));
-    let x_max = xs.fold(2.0f64, f64::max) * 1.5;
-    let y_max = series
+    if log_y {
+        let floor = |pts: &Points| -> Points {
+            pts.iter()
+                .map(|&(x, y)| (x, y.max(LATENCY_FLOOR_MS)))
+                .collect()
+        };
+        let series: Vec<Line> = series
+            .iter()
+            .map(|(n, p, c)| (n.clone(), floor(p), *c))
+            .collect();
+        let top = y_top(&series) * 2.0;
+        return draw(
+            area,
+            title,
+            y_desc,
+            &series,
+            text,
+            (LATENCY_FLOOR_MS..top).log_scale(),
+        );
+    }
+    let top = y_top(series) * 1.15;
+    draw(area, title, y_desc, series, text, -0.03 * top..top)
+}
+
+/// The largest finite value of the series (1 when there is none).
+fn y_top(series: &[Line]) -> f64 {
+    let top = series
         .iter()
         .flat_map(|s| s.1.iter().map(|p| p.1))
         .filter(|v| v.is_finite())
         .fold(0.0f64, f64::max);
-    let y_max = if y_max > 0.0 { y_max * 1.15 } else { 1.0 };
+    if top > 0.0 { top } else { 1.0 }
+}
+
+fn draw<Y>(
+    area: &DrawingArea<BitMapBackend<'_>, Shift>,
+    title: &str,
+    y_desc: &str,
+    series: &[Line],
+    text: bool,
+    y_range: Y,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    Y: AsRangedCoord<Value = f64>,
+    Y::CoordDescType: ValueFormatter<f64>,
+{
+    let xs = series.iter().flat_map(|s| s.1.iter().map(|p| p.0));
+    let x_max = xs.fold(2.0f64, f64::max) * 1.5;
     let mut builder = ChartBuilder::on(area);
     builder.margin(16);
     if text {
@@ -82,8 +156,7 @@ fn panel(
             .x_label_area_size(44)
             .y_label_area_size(64);
     }
-    let mut chart =
-        builder.build_cartesian_2d((0.8f64..x_max).log_scale(), -0.03 * y_max..y_max)?;
+    let mut chart = builder.build_cartesian_2d((0.8f64..x_max).log_scale(), y_range)?;
     let mut mesh = chart.configure_mesh();
     if text {
         mesh.x_desc("Clients (one session each)").y_desc(y_desc);
@@ -91,8 +164,8 @@ fn panel(
         mesh.x_labels(0).y_labels(0);
     }
     mesh.draw()?;
-    for (i, (name, pts)) in series.iter().enumerate() {
-        let color = PALETTE[(i + 1) % PALETTE.len()].to_rgba();
+    for (name, pts, c) in series {
+        let color = PALETTE[c % PALETTE.len()].to_rgba();
         let pts: Points = pts.iter().copied().filter(|p| p.1.is_finite()).collect();
         let drawn = chart.draw_series(LineSeries::new(pts.clone(), color.stroke_width(3)))?;
         if text {
@@ -152,8 +225,8 @@ mod tests {
         scaling(&p, &[("shared lists", &after), ("exact lists", &before)]).unwrap();
         let img = image::open(&p).unwrap().to_rgb8();
         assert_eq!((img.width(), img.height()), SIZE);
-        // Two runs' colours are drawn (the first two palette entries after black).
-        for c in [PALETTE[1], PALETTE[2]] {
+        // Both runs' colours are drawn (each run one colour, its ping line the next).
+        for c in [PALETTE[1], PALETTE[3]] {
             assert!(
                 img.pixels().any(|px| px.0 == [c.0, c.1, c.2]),
                 "no line in {c:?}"
