@@ -185,13 +185,44 @@ fn loadtest_stress_and_bench_run_from_the_command_line() {
     ];
     ok(&[&base[..], &tail[..], &[s(&ss)]].concat());
     assert!(again.join("scaling.png").is_file());
-    let refused = common::portico(&[&base[..], &tail[..], &[s(&st)]].concat());
+    // Refused before any level runs: nothing is written.
+    let never = dir.path().join("never");
+    let tail = ["--stream", "-o", s(&never), "--baseline", s(&st)];
+    let refused = common::portico(&[&base[..], &tail[..]].concat());
     assert!(!refused.status.success());
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(
         err.contains("--baseline") && err.contains("not a stream stress run"),
         "{err}"
     );
+    assert!(!never.join("stress.json").exists());
+    // No server: one line that says so, for either transport, and nothing written.
+    let tour = dir.path().join("tour.json");
+    ok(&["path", "--db", s(&db), "--kind", "tour", "-o", s(&tour)]);
+    for stream in [false, true] {
+        let mut args = vec![
+            "loadtest",
+            "--server",
+            "http://127.0.0.1:1",
+            "--path",
+            s(&tour),
+        ];
+        args.extend(["--stress", "1", "--stress-seconds", "0.2", "-o", s(&never)]);
+        if stream {
+            args.push("--stream");
+        }
+        let out = common::portico(&args);
+        assert!(
+            !out.status.success(),
+            "stream {stream}: succeeded without a server"
+        );
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(
+            err.contains("no server answers at http://127.0.0.1:1/healthz"),
+            "{err}"
+        );
+        assert!(!never.join("stress.json").exists());
+    }
 
     let b = dir.path().join("bench");
     ok(&[

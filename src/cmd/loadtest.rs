@@ -8,7 +8,7 @@ use crate::cmd::values;
 use crate::progress::Bars;
 use anyhow::{Context, Result};
 use portico_client::policy::{parse_policy, policy_spec};
-use portico_lab::loadtest::stress::{StressConfig, level};
+use portico_lab::loadtest::stress::{StressConfig, level, reachable};
 use portico_lab::loadtest::stress_plot;
 use portico_lab::loadtest::stress_stream::{self, StreamStressConfig};
 use portico_lab::loadtest::{Link, LoadtestConfig, LoadtestSummary, grid, run as run_loadtest};
@@ -164,6 +164,7 @@ fn stress(a: &Args, path: portico_data::path::CameraPath, policy: Policy) -> Res
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
+    rt.block_on(reachable(&a.server))?;
     println!(
         "prefetch stress against {} ({}, {} s per level)",
         a.server,
@@ -289,13 +290,23 @@ fn stress_stream(
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()?;
+    // Everything that can be refused is refused before the first level runs.
+    let baseline = match &a.baseline {
+        Some(dir) => Some(stress_stream::read_run(dir).context("--baseline")?),
+        None => None,
+    };
+    rt.block_on(reachable(&a.server))?;
+    let pace = if rate == u64::MAX {
+        "the server's cap".to_string()
+    } else if rate < 125_000 {
+        format!("{:.0} kbit/s", rate as f64 * 8e-3)
+    } else {
+        format!("{:.2} MB/s", rate as f64 / 1e6)
+    };
     println!(
-        "stream stress against {}: one observer per {} ms per session, pushes at {:.2} MB/s per \
+        "stream stress against {}: one observer per {} ms per session, pushes at {pace} per \
          session, {} s measured per level (server figures from its /metrics)",
-        a.server,
-        a.budget_ms,
-        rate as f64 / 1e6,
-        a.stress_seconds
+        a.server, a.budget_ms, a.stress_seconds
     );
     println!(
         "  {:>7} {:>7} {:>9} {:>12} {:>7} {:>11} {:>11} {:>11} {:>16} {:>9} {:>8}",
@@ -331,6 +342,13 @@ fn stress_stream(
         );
         levels.push(l);
     }
+    println!(
+        "  upd p50/p99: upper bounds of the server's histogram buckets (arrival to need list in \
+         place); ping: round trip after an update, at the clients; lists taken/made: need lists \
+         the sessions changed to / of those, computed (the rest came from the shared cache; \
+         exact answers are never cached); KB/sess: resident memory growth per added session \
+         (at the first levels it also holds the map's pages and shared lists as they fill)"
+    );
     std::fs::create_dir_all(&a.out).with_context(|| format!("creating {}", a.out.display()))?;
     let json = serde_json::json!({
         "server": a.server,
@@ -347,10 +365,6 @@ fn stress_stream(
     std::fs::write(&out, serde_json::to_vec_pretty(&json)?)
         .with_context(|| format!("writing {}", out.display()))?;
     let plot = a.out.join("scaling.png");
-    let baseline = match &a.baseline {
-        Some(dir) => Some(stress_stream::read_run(dir).context("--baseline")?),
-        None => None,
-    };
     let mut runs = vec![(stress_plot::run_name(&levels), &levels[..])];
     if let Some(b) = &baseline {
         runs.push((stress_plot::run_name(b), &b[..]));

@@ -82,6 +82,9 @@ pub fn run(a: Args) -> Result<()> {
     listener.set_nonblocking(true)?;
     let addr = listener.local_addr()?;
     announce(&state, addr);
+    if !config.shared_answers {
+        eprintln!("stream sessions: exact answers (every observer its own need list, not shared)");
+    }
     tracing::info!(
         "limits: {} connections, {} s to send headers, {} compute slots with a {} ms deadline",
         config.max_connections,

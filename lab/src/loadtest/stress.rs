@@ -58,6 +58,25 @@ pub struct StressLevel {
     pub items: Series,
 }
 
+/// Fails with a one-line error unless a server answers `GET /healthz` at `server`, so a stress
+/// run against nothing stops before it starts instead of reporting a table of errors.
+pub async fn reachable(server: &str) -> Result<()> {
+    let url = format!("{}/healthz", server.trim_end_matches('/'));
+    let answer = reqwest::Client::new()
+        .get(&url)
+        .timeout(Duration::from_secs(5))
+        .send()
+        .await;
+    match answer {
+        Ok(r) if r.status().is_success() => Ok(()),
+        Ok(r) => anyhow::bail!("{url} answered {}: is it a Portico server?", r.status()),
+        Err(e) => anyhow::bail!(
+            "no server answers at {url} ({}); start one with `portico serve FILE.portico`",
+            e.without_url()
+        ),
+    }
+}
+
 /// Runs one level: `clients` concurrent clients for `cfg.duration`.
 pub async fn level(cfg: &StressConfig, clients: usize) -> Result<StressLevel> {
     let frames = Arc::new(path_frames(&cfg.path, cfg.frame_s, 1e4));

@@ -41,30 +41,33 @@ pub fn scaling(path: &Path, runs: &[(&str, &[StreamLevel])]) -> Result<bool> {
             .map(|l| (l.clients.max(1) as f64, f(l)))
             .collect()
     };
-    // Run i draws in colour 2i+1 on both panels (its ping line in 2i+2), so a run is one
-    // colour across the picture.
+    // A run is one colour on both panels (its ping line the next colour): shared lists green,
+    // exact lists red, whichever run is the baseline, so pictures compare at a glance.
+    let colour = |i: usize, name: &str| match name {
+        "exact lists" => 1,
+        "shared lists" => 3,
+        _ => 5 + 2 * i,
+    };
     let cpu: Vec<Line> = runs
         .iter()
         .enumerate()
         .map(|(i, (name, l))| {
-            (
-                name.to_string(),
-                at(l, &|l| l.cpu_per_update_ms * 1e3),
-                2 * i + 1,
-            )
+            let ys = at(l, &|l| l.cpu_per_update_ms * 1e3);
+            (name.to_string(), ys, colour(i, name))
         })
         .collect();
     let mut latency = Vec::new();
     for (i, (name, l)) in runs.iter().enumerate() {
+        let c = colour(i, name);
         latency.push((
             format!("{name}: in the server (bucket bound)"),
             at(l, &|l| l.update_p99_s * 1e3),
-            2 * i + 1,
+            c,
         ));
         latency.push((
             format!("{name}: ping after the update"),
             at(l, &|l| l.ping_s.p99 * 1e3),
-            2 * i + 2,
+            c + 1,
         ));
     }
     panel(
@@ -159,7 +162,9 @@ where
     let mut chart = builder.build_cartesian_2d((0.8f64..x_max).log_scale(), y_range)?;
     let mut mesh = chart.configure_mesh();
     if text {
-        mesh.x_desc("Clients (one session each)").y_desc(y_desc);
+        mesh.x_desc("Clients (one session each)")
+            .y_desc(y_desc)
+            .x_label_formatter(&|x| format!("{x:.0}"));
     } else {
         mesh.x_labels(0).y_labels(0);
     }
