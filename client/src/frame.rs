@@ -24,7 +24,7 @@ use portico_data::format::Header;
 use portico_data::geometry::Aabb;
 use portico_data::hierarchy::Hierarchy;
 use std::sync::Arc;
-use std::time::Instant;
+use web_time::Instant;
 
 /// What the client's cache holds, as the decision asks it.
 pub trait Resident {

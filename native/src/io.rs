@@ -149,16 +149,7 @@ pub fn verify(info: Option<&SegmentInfo>, id: u32, bytes: &[u8]) -> anyhow::Resu
     let Some(info) = info else {
         bail!("segment {id}: not in the manifest");
     };
-    let sum = xxhash_rust::xxh3::xxh3_64(bytes);
-    if bytes.len() as u64 != info.bytes || sum != info.checksum {
-        bail!(
-            "segment {id}: corrupt ({} bytes, xxh3 {sum:016x}; the manifest says {} bytes, {:016x})",
-            bytes.len(),
-            info.bytes,
-            info.checksum
-        );
-    }
-    Ok(())
+    info.check(id, bytes).map_err(anyhow::Error::msg)
 }
 
 /// A running IO stage.

@@ -39,6 +39,26 @@ pub struct SegmentInfo {
     pub checksum: u64,
 }
 
+impl SegmentInfo {
+    /// Checks a segment's bytes against this row (length and xxh3, the strong ETag), so a
+    /// segment damaged on the way is rejected before anything decodes or uploads it.
+    ///
+    /// # Errors
+    /// One line naming segment `id`, what arrived and what the manifest says.
+    pub fn check(&self, id: u32, bytes: &[u8]) -> Result<(), String> {
+        let sum = xxhash_rust::xxh3::xxh3_64(bytes);
+        if bytes.len() as u64 != self.bytes || sum != self.checksum {
+            return Err(format!(
+                "segment {id}: corrupt ({} bytes, xxh3 {sum:016x}; the manifest says {} bytes, {:016x})",
+                bytes.len(),
+                self.bytes,
+                self.checksum
+            ));
+        }
+        Ok(())
+    }
+}
+
 /// Where the observer is and how fast it may move (Funkhouser §5.2.1: the observer range).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Observer {

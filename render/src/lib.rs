@@ -20,10 +20,12 @@
 
 mod calibrate;
 mod held;
+#[cfg(not(target_arch = "wasm32"))]
 pub mod impostor;
 mod mesh;
 mod pipeline;
 mod renderer;
+#[cfg(not(target_arch = "wasm32"))]
 pub mod sheet;
 pub mod textured;
 

@@ -12,7 +12,7 @@ use crate::{
 use glam::{Mat4, Vec3};
 use portico_data::geometry::Aabb;
 use std::sync::{Arc, mpsc};
-use std::time::Instant;
+use web_time::Instant;
 
 /// The headless renderer: device, offscreen targets, pipeline and per-frame buffers.
 #[derive(Debug)]
@@ -41,11 +41,13 @@ impl Renderer {
     /// Creates a device on the default adapter (or the one `WGPU_BACKEND` / `WGPU_ADAPTER_NAME`
     /// select) with offscreen targets of `width` x `height` pixels, [`crate::SAMPLES`] per pixel
     /// on a GPU and one on a CPU rasteriser unless `PORTICO_MSAA` (1 or 4) says otherwise.
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn new(width: u32, height: u32) -> Result<Renderer, RenderError> {
         Self::with_samples(width, height, None)
     }
 
     /// As [`Renderer::new`] with `samples` per pixel (1 or 4; `None`: the adapter's default).
+    #[cfg(not(target_arch = "wasm32"))]
     pub fn with_samples(
         width: u32,
         height: u32,
@@ -56,14 +58,35 @@ impl Renderer {
         let adapter = pollster::block_on(wgpu::util::initialize_adapter_from_env_or_default(
             &instance, None,
         ))?;
-        let (device, queue) =
-            pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        let samples = samples.or_else(msaa_from_env);
+        pollster::block_on(Self::on_adapter(instance, &adapter, width, height, samples))
+    }
+
+    /// A renderer on `adapter` (found by the caller: a browser's, one compatible with a window's
+    /// surface), with a device of the adapter's own limits and targets of `width` x `height`
+    /// pixels; `samples` per pixel (1 or 4), or `None` for [`crate::SAMPLES`] on a GPU and one
+    /// on a CPU rasteriser. Frames go to the offscreen targets ([`Renderer::render`]) or to a
+    /// surface's texture ([`Renderer::render_into`]) of [`crate::COLOR_FORMAT`].
+    ///
+    /// # Errors
+    /// [`RenderError::NoDevice`] when the adapter refuses a device; [`RenderError::BadSize`]
+    /// for a zero or oversized target.
+    pub async fn on_adapter(
+        instance: wgpu::Instance,
+        adapter: &wgpu::Adapter,
+        width: u32,
+        height: u32,
+        samples: Option<u32>,
+    ) -> Result<Renderer, RenderError> {
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
                 label: Some("portico"),
                 required_limits: adapter.limits(),
                 ..Default::default()
-            }))?;
+            })
+            .await?;
         let info = adapter.get_info();
-        let samples = match samples.or_else(msaa_from_env) {
+        let samples = match samples {
             Some(n) => n,
             None if info.device_type == wgpu::DeviceType::Cpu => 1,
             None => crate::SAMPLES,
@@ -108,6 +131,16 @@ impl Renderer {
             samples,
             held: Default::default(),
         })
+    }
+
+    /// The device frames are drawn with (to configure a surface for [`Renderer::render_into`]).
+    pub fn device(&self) -> &wgpu::Device {
+        &self.device
+    }
+
+    /// The queue frames are submitted to (to present a surface's texture).
+    pub fn queue(&self) -> &wgpu::Queue {
+        &self.queue
     }
 
     /// Sets the colour frames are cleared to (default [`SKY_COLOR`]; a transparent one for
@@ -241,11 +274,40 @@ impl Renderer {
     ) -> Result<FrameTiming, RenderError> {
         let start = Instant::now();
         let device = self.device.clone();
-        let mut timing = scoped(&device, || self.submit_frame(view_proj, draws, boxes))??;
+        let target = self.targets.color_view.clone();
+        let mut timing = scoped(&device, || {
+            self.submit_frame(view_proj, draws, boxes, &target)
+        })??;
         timing.cpu_submit_s = start.elapsed().as_secs_f64();
         self.device.poll(wgpu::PollType::wait_indefinitely())?;
         timing.total_s = start.elapsed().as_secs_f64();
         self.has_frame = true;
+        Ok(timing)
+    }
+
+    /// Draws one frame of `draws` and `boxes` with `view_proj` into `target` (a surface's
+    /// texture of [`crate::COLOR_FORMAT`] and the renderer's size) and submits it without waiting
+    /// for the GPU: the window and the browser present frames this way, with no read-back.
+    /// [`FrameTiming::total_s`] is then the time to submit; the caller measures the frame
+    /// interval. With MSAA the samples are resolved into `target`.
+    ///
+    /// # Errors
+    /// [`RenderError::TooLarge`] when the draws outgrow the device's buffers; natively, a GPU
+    /// validation or out-of-memory error as [`RenderError::Gpu`].
+    pub fn render_into(
+        &mut self,
+        view_proj: Mat4,
+        draws: &[Draw<'_>],
+        boxes: &[&GpuImpostor],
+        target: &wgpu::TextureView,
+    ) -> Result<FrameTiming, RenderError> {
+        let start = Instant::now();
+        let device = self.device.clone();
+        let mut timing = scoped(&device, || {
+            self.submit_frame(view_proj, draws, boxes, target)
+        })??;
+        timing.cpu_submit_s = start.elapsed().as_secs_f64();
+        timing.total_s = timing.cpu_submit_s;
         Ok(timing)
     }
 
@@ -315,12 +377,14 @@ impl Renderer {
         Ok((timing, self.read_pixels()?))
     }
 
-    /// Uploads the frame's uniforms and instances, encodes the pass and submits it.
+    /// Uploads the frame's uniforms and instances, encodes the pass into `target` and submits
+    /// it.
     fn submit_frame(
         &mut self,
         view_proj: Mat4,
         draws: &[Draw<'_>],
         boxes: &[&GpuImpostor],
+        target: &wgpu::TextureView,
     ) -> Result<FrameTiming, RenderError> {
         self.write_globals(view_proj);
         self.write_instances(draws)?;
@@ -329,7 +393,10 @@ impl Renderer {
             .create_command_encoder(&wgpu::CommandEncoderDescriptor {
                 label: Some("frame"),
             });
-        let timing = self.encode_pass(&mut encoder, draws, boxes);
+        let timing = {
+            let mut pass = self.begin_pass(&mut encoder, target);
+            self.encode_draws(&mut pass, draws, boxes)
+        };
         self.queue.submit([encoder.finish()]);
         Ok(timing)
     }
@@ -373,15 +440,14 @@ impl Renderer {
         Ok(())
     }
 
-    /// Records the render pass: clear, then one instanced draw per non-empty mesh, then the
-    /// textured boxes.
-    fn encode_pass(
+    /// Records one instanced draw per non-empty mesh, then the textured boxes, into an open
+    /// pass.
+    fn encode_draws(
         &self,
-        encoder: &mut wgpu::CommandEncoder,
+        pass: &mut wgpu::RenderPass<'_>,
         draws: &[Draw<'_>],
         boxes: &[&GpuImpostor],
     ) -> FrameTiming {
-        let mut pass = self.begin_pass(encoder);
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
         pass.set_vertex_buffer(1, self.instances.slice(..));
@@ -401,31 +467,30 @@ impl Renderer {
             timing.vertices += u64::from(d.mesh.vertex_count);
             timing.draws += 1;
         }
-        self.textured.draw(&mut pass, &self.bind_group, boxes);
+        self.textured.draw(pass, &self.bind_group, boxes);
         timing.triangles += 12 * boxes.len() as u64;
         timing.vertices += 24 * boxes.len() as u64;
         timing.draws += boxes.len() as u32;
         timing
     }
 
-    fn begin_pass<'e>(&self, encoder: &'e mut wgpu::CommandEncoder) -> wgpu::RenderPass<'e> {
+    /// A pass that clears and draws into the multisampled target resolved into `target`, or
+    /// into `target` itself with one sample per pixel.
+    fn begin_pass<'e>(
+        &self,
+        encoder: &'e mut wgpu::CommandEncoder,
+        target: &wgpu::TextureView,
+    ) -> wgpu::RenderPass<'e> {
+        let msaa = self.targets.msaa_view.as_ref();
         encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
             label: Some("frame"),
             color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                view: self
-                    .targets
-                    .msaa_view
-                    .as_ref()
-                    .unwrap_or(&self.targets.color_view),
+                view: msaa.unwrap_or(target),
                 depth_slice: None,
-                resolve_target: self
-                    .targets
-                    .msaa_view
-                    .as_ref()
-                    .map(|_| &self.targets.color_view),
+                resolve_target: msaa.map(|_| target),
                 ops: wgpu::Operations {
                     load: wgpu::LoadOp::Clear(self.clear),
-                    store: if self.targets.msaa_view.is_some() {
+                    store: if msaa.is_some() {
                         wgpu::StoreOp::Discard
                     } else {
                         wgpu::StoreOp::Store
@@ -494,8 +559,15 @@ impl Renderer {
     }
 }
 
+/// In a browser nothing may block: errors go to the device's handler (the console) instead.
+#[cfg(target_arch = "wasm32")]
+pub(crate) fn scoped<T>(_device: &wgpu::Device, f: impl FnOnce() -> T) -> Result<T, RenderError> {
+    Ok(f())
+}
+
 /// Runs `f` with out-of-memory and validation errors captured as [`RenderError::Gpu`] instead of
 /// reaching wgpu's default handler, which panics.
+#[cfg(not(target_arch = "wasm32"))]
 pub(crate) fn scoped<T>(device: &wgpu::Device, f: impl FnOnce() -> T) -> Result<T, RenderError> {
     let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
     let validation = device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -528,6 +600,7 @@ pub(crate) fn extent(width: u32, height: u32) -> wgpu::Extent3d {
 }
 
 /// `PORTICO_MSAA` as a sample count: 1 or 4; anything else is ignored with a warning.
+#[cfg(not(target_arch = "wasm32"))]
 fn msaa_from_env() -> Option<u32> {
     let v = std::env::var("PORTICO_MSAA").ok()?;
     match v.trim() {

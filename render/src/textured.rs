@@ -181,11 +181,11 @@ impl Textured {
     }
 
     /// Draws textured boxes in an open render pass whose group 0 is already the globals.
-    pub fn draw<'a>(
-        &'a self,
-        pass: &mut wgpu::RenderPass<'a>,
-        globals: &'a wgpu::BindGroup,
-        boxes: &[&'a GpuImpostor],
+    pub fn draw(
+        &self,
+        pass: &mut wgpu::RenderPass<'_>,
+        globals: &wgpu::BindGroup,
+        boxes: &[&GpuImpostor],
     ) {
         if boxes.is_empty() {
             return;

@@ -42,6 +42,9 @@ pub struct Config {
     /// How long requests in flight may finish after a stop or reload before their connections
     /// are closed.
     pub drain: Duration,
+    /// The folder of the built browser viewer (`web/build.sh`: `index.html`, `portico_web.js`,
+    /// `portico_web_bg.wasm`), served at `/`; `None`: `/` says how to build it.
+    pub viewer: Option<std::path::PathBuf>,
 }
 
 impl Default for Config {
@@ -62,6 +65,7 @@ impl Default for Config {
             drain: Duration::from_secs(10),
             shared_answers: true,
             shared_cache_bytes: portico_data::prefetch::shared::DEFAULT_CACHE_BYTES,
+            viewer: None,
         }
     }
 }

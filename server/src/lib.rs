@@ -21,6 +21,7 @@ pub mod routes;
 pub mod state;
 pub mod stream;
 pub mod track;
+pub mod viewer;
 
 pub use config::Config;
 pub use state::AppState;
@@ -57,6 +58,7 @@ pub fn router(state: Arc<AppState>) -> Router {
         None => api,
     };
     Router::new()
+        .merge(viewer::routes(state.config.viewer.as_deref()))
         .route("/healthz", get(routes::healthz))
         .route("/metrics", get(routes::metrics))
         .merge(api)

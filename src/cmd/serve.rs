@@ -45,6 +45,10 @@ pub struct Args {
     /// direction bucket (the baseline the shared answers are measured against; exact, costly).
     #[arg(long)]
     exact_answers: bool,
+    /// The built browser viewer to serve at `/` (default: `target/viewer` beside the binary's
+    /// folder or under the current folder, where `web/build.sh` puts it).
+    #[arg(long, value_name = "DIR")]
+    viewer: Option<PathBuf>,
     /// Memory for the stream sessions' shared need lists, MB.
     #[arg(long, default_value_t = 256)]
     shared_cache_mb: usize,
@@ -52,6 +56,28 @@ pub struct Args {
     /// connections are closed.
     #[arg(long, default_value_t = 10)]
     drain_secs: u64,
+}
+
+/// The viewer folder: the one given (which must hold a built viewer), else `target/viewer`
+/// next to the binary's folder (`target/release/portico`) or under the current folder.
+fn viewer_dir(given: Option<PathBuf>) -> Result<Option<PathBuf>> {
+    if let Some(d) = given {
+        if !portico_server::viewer::is_built(&d) {
+            anyhow::bail!(
+                "--viewer {}: no built viewer there (index.html, {}); run `bash web/build.sh`",
+                d.display(),
+                portico_server::viewer::FILES.join(", ")
+            );
+        }
+        return Ok(Some(d));
+    }
+    let beside = std::env::current_exe()
+        .ok()
+        .and_then(|e| Some(e.parent()?.parent()?.join("viewer")));
+    Ok(beside
+        .into_iter()
+        .chain([PathBuf::from("target/viewer")])
+        .find(|d| portico_server::viewer::is_built(d)))
 }
 
 /// Opens the database and serves until interrupted.
@@ -66,6 +92,7 @@ pub fn run(a: Args) -> Result<()> {
         drain: Duration::from_secs(a.drain_secs),
         shared_answers: !a.exact_answers,
         shared_cache_bytes: a.shared_cache_mb << 20,
+        viewer: viewer_dir(a.viewer)?,
         ..Config::default()
     };
     let state = AppState::open(&a.file, config.clone())?;
@@ -82,6 +109,10 @@ pub fn run(a: Args) -> Result<()> {
     listener.set_nonblocking(true)?;
     let addr = listener.local_addr()?;
     announce(&state, addr);
+    match &config.viewer {
+        Some(d) => eprintln!("browser viewer (from {}): open http://{addr}/", d.display()),
+        None => eprintln!("no browser viewer at / (build it with `bash web/build.sh`)"),
+    }
     if !config.shared_answers {
         eprintln!("stream sessions: exact answers (every observer its own need list, not shared)");
     }

@@ -1,0 +1,147 @@
+#!/usr/bin/env python3
+"""The browser viewer's figures in headless Chromium (WebGL2 through SwiftShader).
+
+Against a running `portico serve MODEL` that serves the viewer (`bash web/build.sh` first):
+
+    python3 bench/browser.py --server http://127.0.0.1:7878 [--link 50ms,10mbit] [--seconds 20]
+
+starts chromedriver, opens the page (with Chromium's own network emulation when `--link` is
+given: latency added to every request, download and upload throttled), and prints as JSON:
+the time from the start of page load to the first complete frame (every visible object drawn),
+the bytes received until then, and the mean frame interval while the standard tour plays for
+`--seconds`. Only the standard library: it speaks WebDriver's JSON over HTTP itself.
+"""
+
+import argparse
+import base64
+import json
+import socket
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+
+
+def call(base, method, path, body=None):
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(base + path, data=data, method=method,
+                                 headers={"content-type": "application/json"})
+    try:
+        with urllib.request.urlopen(req, timeout=120) as r:
+            return json.loads(r.read() or b"null").get("value")
+    except urllib.error.HTTPError as e:
+        detail = json.loads(e.read() or b"{}").get("value", {})
+        raise RuntimeError(f"{method} {path}: {detail.get('message', e)}") from None
+
+
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def parse_link(spec):
+    """'50ms,10mbit' -> (latency ms, bytes per second)."""
+    latency, rate = spec.split(",")
+    ms = float(latency.removesuffix("ms"))
+    units = {"kbit": 1e3, "mbit": 1e6, "gbit": 1e9}
+    unit = next(u for u in units if rate.endswith(u))
+    return ms, float(rate.removesuffix(unit)) * units[unit] / 8
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--server", default="http://127.0.0.1:7878")
+    ap.add_argument("--link", help="emulated link, e.g. 50ms,10mbit")
+    ap.add_argument("--seconds", type=float, default=20.0, help="how long the tour plays")
+    ap.add_argument("--size", default="640x480", help="the canvas's size in CSS pixels")
+    ap.add_argument("--query", default="backend=webgl", help="the page's query string")
+    ap.add_argument("--screenshot", help="save the page at the end of the tour here (PNG)")
+    a = ap.parse_args()
+    w, h = (int(v) for v in a.size.split("x"))
+    port = free_port()
+    driver = subprocess.Popen(["chromedriver", f"--port={port}"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    base = f"http://127.0.0.1:{port}"
+    try:
+        for _ in range(100):
+            try:
+                call(base, "GET", "/status")
+                break
+            except OSError:
+                time.sleep(0.1)
+        caps = {"capabilities": {"alwaysMatch": {"goog:chromeOptions": {
+            "binary": "/usr/bin/chromium",
+            "args": ["--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
+                     "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+                     f"--window-size={w + 100},{h + 300}", "--force-device-scale-factor=1"]}}}}
+        sid = call(base, "POST", "/session", caps)["sessionId"]
+        s = f"/session/{sid}"
+        if a.link:
+            ms, rate = parse_link(a.link)
+            call(base, "POST", f"{s}/chromium/network_conditions", {"network_conditions": {
+                "offline": False, "latency": ms, "download_throughput": rate,
+                "upload_throughput": rate}})
+        # The page fills its window; the canvas is then set to the asked size (the viewer
+        # follows its canvas's size every frame).
+        call(base, "POST", f"{s}/url", {"url": f"{a.server}/?{a.query}"})
+
+        def run(script):
+            return call(base, "POST", f"{s}/execute/sync", {"script": script, "args": []})
+
+        run(f"document.getElementById('view').style.width='{w}px';"
+            f"document.getElementById('view').style.height='{h}px';")
+        t0 = time.time()
+        stats = None
+        while time.time() - t0 < 300:
+            err = run("return window.porticoError || null")
+            if err:
+                sys.exit(f"the page failed: {err}")
+            try:
+                raw = run("return window.portico ? window.portico.stats() : null")
+            except RuntimeError as e:
+                sys.exit(f"{e}\nthe page's errors: {run('return window.porticoErrors')}")
+            stats = json.loads(raw) if raw else None
+            if stats and stats.get("first_complete_ms") is not None:
+                break
+            time.sleep(0.1)
+        first = dict(stats or {})
+        run("window.portico.tour(true)")
+        samples = []
+        t1 = time.time()
+        frames0 = first.get("frames", 0)
+        while time.time() - t1 < a.seconds:
+            time.sleep(0.5)
+            samples.append(json.loads(run("return window.portico.stats()")))
+        last = samples[-1] if samples else first
+        out = {
+            "server": a.server,
+            "link": a.link or "loopback",
+            "canvas": [w, h],
+            "backend": first.get("backend"),
+            "first_complete_ms": first.get("first_complete_ms"),
+            "first_complete_frame": first.get("first_complete_frame"),
+            "bytes_at_first_complete": first.get("bytes_received"),
+            "tour_seconds": a.seconds,
+            "tour_frames": last.get("frames", 0) - frames0,
+            "mean_frame_ms": (a.seconds * 1e3 / max(1, last.get("frames", 0) - frames0)),
+            "objects_skipped_mean": sum(x["objects_skipped"] for x in samples) / max(1, len(samples)),
+            "visible_objects_mean": sum(x["visible_objects"] for x in samples) / max(1, len(samples)),
+            "resident_mb": last.get("resident_bytes", 0) / 2**20,
+            "cache_budget_mb": last.get("cache_budget", 0) / 2**20,
+            "received_mb": last.get("bytes_received", 0) / 1e6,
+            "failures": last.get("failures"),
+            "errors": run("return window.porticoErrors || []"),
+        }
+        if a.screenshot:
+            with open(a.screenshot, "wb") as f:
+                f.write(base64.b64decode(call(base, "GET", f"{s}/screenshot")))
+        print(json.dumps(out, indent=2))
+        call(base, "DELETE", s)
+    finally:
+        driver.kill()
+
+
+if __name__ == "__main__":
+    main()

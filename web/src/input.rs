@@ -1,0 +1,135 @@
+//! What the person at the page does, turned into [`Controls`] and key steps for the
+//! [`Navigator`] (Funkhouser §3.3.1's mouse scheme, plus WASD and touch):
+//!
+//! - a pointer held on the canvas moves forward (left button, one finger), backward (right
+//!   button) or spins (middle button), turning towards the pointer; Control also turns up and
+//!   down;
+//! - W/S or ↑/↓ walk forward and back, A/D step sideways, Q/E or ←/→ turn, R/F rise and sink
+//!   — for as long as the key is held;
+//! - T starts or stops the model's standard tour.
+
+use glam::Vec3;
+use portico_client::navigate::{Controls, Navigator};
+use std::collections::HashSet;
+
+/// The input state between frames.
+#[derive(Debug, Default)]
+pub struct Input {
+    /// Pointer buttons and position, as the navigator reads them.
+    pub controls: Controls,
+    /// Keys held now (`KeyboardEvent.code`).
+    pub keys: HashSet<String>,
+    /// T was pressed since the last frame.
+    pub toggle_tour: bool,
+    /// Something moved the view since the last frame (stops the tour).
+    pub touched: bool,
+}
+
+impl Input {
+    /// A key went down; `true` when the page should not also scroll with it.
+    pub fn key_down(&mut self, code: &str) -> bool {
+        if code == "KeyT" {
+            self.toggle_tour = true;
+            return true;
+        }
+        let ours = matches!(
+            code,
+            "KeyW"
+                | "KeyA"
+                | "KeyS"
+                | "KeyD"
+                | "KeyQ"
+                | "KeyE"
+                | "KeyR"
+                | "KeyF"
+                | "ArrowUp"
+                | "ArrowDown"
+                | "ArrowLeft"
+                | "ArrowRight"
+        );
+        if ours {
+            self.keys.insert(code.to_string());
+            self.touched = true;
+        }
+        ours
+    }
+
+    /// A key went up.
+    pub fn key_up(&mut self, code: &str) {
+        self.keys.remove(code);
+    }
+
+    /// A pointer button went down at `cursor` (-1..1, y up): 0 forward, 1 spin, 2 backward.
+    pub fn pointer_down(&mut self, button: i16, cursor: [f32; 2], ctrl: bool) {
+        match button {
+            0 => self.controls.forward = true,
+            1 => self.controls.spin = true,
+            2 => self.controls.backward = true,
+            _ => return,
+        }
+        self.controls.cursor = cursor;
+        self.controls.pitch = ctrl;
+        self.touched = true;
+    }
+
+    /// The pointer moved.
+    pub fn pointer_move(&mut self, cursor: [f32; 2], ctrl: bool) {
+        self.controls.cursor = cursor;
+        self.controls.pitch = ctrl;
+    }
+
+    /// Every button released (or the pointer left the page).
+    pub fn pointer_up(&mut self) {
+        self.controls.forward = false;
+        self.controls.backward = false;
+        self.controls.spin = false;
+    }
+
+    /// Moves `nav` by `dt` seconds of what is held; returns the velocity (m/s).
+    pub fn apply(&self, nav: &mut Navigator, dt: f32) -> Vec3 {
+        let before = nav.eye;
+        nav.update(&self.controls, dt);
+        let held = |a: &str, b: &str| self.keys.contains(a) || self.keys.contains(b);
+        let axis = |plus: bool, minus: bool| f32::from(u8::from(plus)) - f32::from(u8::from(minus));
+        let walk = axis(held("KeyW", "ArrowUp"), held("KeyS", "ArrowDown"));
+        let side = axis(self.keys.contains("KeyD"), self.keys.contains("KeyA"));
+        let turn = axis(held("KeyE", "ArrowRight"), held("KeyQ", "ArrowLeft"));
+        let rise = axis(self.keys.contains("KeyR"), self.keys.contains("KeyF"));
+        nav.yaw += turn * nav.turn * 0.5 * dt;
+        let flat = Vec3::new(nav.yaw.cos(), 0.0, nav.yaw.sin());
+        let right = flat.cross(Vec3::Y);
+        nav.eye += (nav.dir() * walk + right * side + Vec3::Y * rise) * nav.speed * dt;
+        if dt > 0.0 {
+            (nav.eye - before) / dt
+        } else {
+            Vec3::ZERO
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn held_keys_walk_and_turn() {
+        let mut nav = Navigator::new(Vec3::ZERO, Vec3::X, 2.0, 2.0);
+        let mut input = Input::default();
+        assert!(input.key_down("KeyW"));
+        let v = input.apply(&mut nav, 0.5);
+        assert!(
+            (nav.eye - Vec3::new(1.0, 0.0, 0.0)).length() < 1e-5,
+            "{}",
+            nav.eye
+        );
+        assert!((v - Vec3::new(2.0, 0.0, 0.0)).length() < 1e-4);
+        input.key_up("KeyW");
+        assert!(input.key_down("KeyE"));
+        input.apply(&mut nav, 0.5);
+        assert!((nav.yaw - 0.5).abs() < 1e-5, "{}", nav.yaw);
+        assert!(
+            !input.key_down("KeyZ"),
+            "keys that are not ours scroll the page"
+        );
+    }
+}

@@ -1,0 +1,196 @@
+//! The lookahead/IO stage in a page (Funkhouser Ch. 6 and §5.2.3): the same read
+//! [`Schedule`] as the native client's IO thread, run on the page's one thread. Requests are
+//! promises; what they bring waits in an inbox until the next frame takes it, so a frame never
+//! waits for the network. One prefetch request is in flight at a time (a newer observer waits
+//! for its answer) and up to [`PARALLEL`] segment batches.
+
+use crate::net::{Remote, Stale};
+use portico_client::schedule::Schedule;
+use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
+use std::cell::RefCell;
+use std::collections::{HashMap, HashSet, VecDeque};
+use std::rc::Rc;
+use web_time::Instant;
+
+/// Segment batches in flight at once (as the native client).
+pub const PARALLEL: usize = 8;
+
+/// What a finished request left in the inbox.
+enum Done {
+    Answer(u64, Instant, anyhow::Result<PrefetchResponse>),
+    Batch(
+        Vec<u32>,
+        anyhow::Result<Vec<(u32, anyhow::Result<Vec<u8>>)>>,
+    ),
+}
+
+/// What the frame loop gets from the IO stage.
+pub enum Arrival {
+    /// A segment, its bytes checked against the manifest, and when a need list first asked for
+    /// it.
+    Segment(u32, Vec<u8>, Instant),
+    /// The server's eviction hints of its latest answer (§5.2.3).
+    Release(Vec<u32>),
+    /// A request failed; a later list may ask again.
+    Failed(String),
+    /// The server serves another file now: the stage has stopped.
+    Stale(String),
+}
+
+/// Each segment's size and checksum (the manifest's table) and what it occupies decoded.
+pub struct Catalogue {
+    /// The manifest's segment table, by id.
+    pub segments: Vec<portico_protocol::SegmentInfo>,
+    /// Geometry segments by their decoded size.
+    pub decoded: HashMap<u32, u64>,
+}
+
+/// The IO stage: the schedule, the requests in flight and their inbox.
+pub struct Io {
+    remote: Rc<Remote>,
+    catalogue: Rc<Catalogue>,
+    policy: Policy,
+    schedule: Schedule,
+    inbox: Rc<RefCell<VecDeque<Done>>>,
+    asking: bool,
+    batches: usize,
+    /// Events handed to the frame loop so far (the schedule's sequence numbers).
+    seq: u64,
+    stopped: bool,
+}
+
+impl Io {
+    /// A stage reading from `remote` under `policy`, keeping at most `window` bytes in flight
+    /// or delivered and not yet taken.
+    pub fn new(remote: Rc<Remote>, catalogue: Catalogue, policy: Policy, window: u64) -> Io {
+        Io {
+            remote,
+            catalogue: Rc::new(catalogue),
+            policy,
+            schedule: Schedule::with_window(window),
+            inbox: Rc::new(RefCell::new(VecDeque::new())),
+            asking: false,
+            batches: 0,
+            seq: 0,
+            stopped: false,
+        }
+    }
+
+    /// Takes what the finished requests brought: answers become the read list, segments are
+    /// checked against the manifest. Everything returned counts as taken by the frame loop.
+    pub fn take(&mut self) -> Vec<Arrival> {
+        let mut out = Vec::new();
+        let now = Instant::now();
+        let done: Vec<Done> = self.inbox.borrow_mut().drain(..).collect();
+        for d in done {
+            match d {
+                Done::Answer(ask, at, answer) => {
+                    self.asking = false;
+                    match answer {
+                        Ok(resp) => {
+                            self.schedule.answered(ask);
+                            self.schedule
+                                .refresh(resp.items.iter().map(|i| i.segment).collect(), at);
+                            out.push(Arrival::Release(resp.evict));
+                        }
+                        Err(e) => out.push(self.failure(e)),
+                    }
+                }
+                Done::Batch(ids, got) => {
+                    self.batches -= 1;
+                    let items = match got {
+                        Ok(items) => items,
+                        Err(e) => {
+                            for &id in &ids {
+                                self.schedule.finished(id, Err(()), now);
+                            }
+                            out.push(self.failure(e));
+                            continue;
+                        }
+                    };
+                    let mut answered = HashSet::new();
+                    for (id, item) in items {
+                        answered.insert(id);
+                        let checked = item.and_then(|b| {
+                            crate::verify(self.catalogue.segments.get(id as usize), id, &b)
+                                .map(|()| b)
+                        });
+                        match checked {
+                            Ok(bytes) => {
+                                self.seq += 1;
+                                let listed = self.schedule.finished(id, Ok(self.seq), now);
+                                out.push(Arrival::Segment(id, bytes, listed));
+                            }
+                            Err(e) => {
+                                self.schedule.finished(id, Err(()), now);
+                                out.push(Arrival::Failed(format!("{e:#}")));
+                            }
+                        }
+                    }
+                    for id in ids.into_iter().filter(|id| !answered.contains(id)) {
+                        self.schedule.finished(id, Err(()), now);
+                    }
+                }
+            }
+        }
+        // The frame loop takes every arrival at once.
+        self.schedule.acknowledge(self.seq, true);
+        out
+    }
+
+    fn failure(&mut self, e: anyhow::Error) -> Arrival {
+        if e.downcast_ref::<Stale>().is_some() {
+            self.stopped = true;
+            return Arrival::Stale(format!("{e:#}"));
+        }
+        Arrival::Failed(format!("{e:#}"))
+    }
+
+    /// After a frame: asks the server about `observer` unless an answer is pending, and keeps
+    /// up to [`PARALLEL`] batches in flight from the top of the latest read list. `held`: the
+    /// segments resident in the cache.
+    pub fn pump(&mut self, observer: Observer, held: impl Iterator<Item = u32>) {
+        if self.stopped {
+            return;
+        }
+        if !self.asking {
+            self.asking = true;
+            let held: HashSet<u32> = held.chain(self.schedule.pending()).collect();
+            let number = self.schedule.asked();
+            let req = PrefetchRequest {
+                version: PROTOCOL_VERSION,
+                observer,
+                policy: self.policy,
+                held: portico_protocol::encode_held(held),
+            };
+            let (remote, inbox) = (self.remote.clone(), self.inbox.clone());
+            wasm_bindgen_futures::spawn_local(async move {
+                let at = Instant::now();
+                let answer = remote.prefetch(&req).await;
+                inbox
+                    .borrow_mut()
+                    .push_back(Done::Answer(number, at, answer));
+            });
+        }
+        let catalogue = self.catalogue.clone();
+        let wire = |id: u32| catalogue.segments.get(id as usize).map_or(0, |s| s.bytes);
+        let held = |id: u32| {
+            catalogue
+                .decoded
+                .get(&id)
+                .map_or(wire(id), |&d| d.max(wire(id)))
+        };
+        while self.batches < PARALLEL {
+            let ids = self.schedule.next_batch_sized(Instant::now(), &wire, &held);
+            if ids.is_empty() {
+                break;
+            }
+            self.batches += 1;
+            let (remote, inbox) = (self.remote.clone(), self.inbox.clone());
+            wasm_bindgen_futures::spawn_local(async move {
+                let got = remote.batch(&ids).await;
+                inbox.borrow_mut().push_back(Done::Batch(ids, got));
+            });
+        }
+    }
+}

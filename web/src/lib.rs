@@ -1,0 +1,39 @@
+//! The Portico browser viewer: open a URL, walk the building.
+//!
+//! The same client core as the native walker ([`portico_client`]: the LRU cache under a byte
+//! budget, visibility through the cells, detail elision over resident LODs, the read schedule)
+//! and the same renderer ([`portico_render`], wgpu on WebGPU where the browser has an adapter,
+//! else WebGL2), compiled to wasm32 and fetching from a Portico server over HTTP: prefetch
+//! answers (Funkhouser §5.2) and segment batches. `portico serve` serves the page at `/`;
+//! `web/build.sh` builds it.
+//!
+//! Query parameters of the page: `server` (another origin's server; default the page's own),
+//! `cache_mb` (the byte budget, default 64), `budget_ms` (the frame budget, default 50),
+//! `backend` (`webgl`, `webgpu` or `auto`, the default). The fragment holds the viewpoint
+//! (`#eye=x,y,z&dir=x,y,z`), kept up to date so the address shares what one sees.
+//!
+//! Natively only [`input`] is compiled (and tested); everything else is for `wasm32`.
+
+pub mod input;
+#[cfg(target_arch = "wasm32")]
+mod io;
+#[cfg(target_arch = "wasm32")]
+mod net;
+#[cfg(target_arch = "wasm32")]
+mod page;
+#[cfg(target_arch = "wasm32")]
+mod viewer;
+
+#[cfg(target_arch = "wasm32")]
+pub use page::{Handle, start};
+
+/// Checks a segment against its manifest row (size and xxh3).
+#[cfg(target_arch = "wasm32")]
+pub(crate) fn verify(
+    info: Option<&portico_protocol::SegmentInfo>,
+    id: u32,
+    bytes: &[u8],
+) -> anyhow::Result<()> {
+    let info = info.ok_or_else(|| anyhow::anyhow!("segment {id}: not in the manifest"))?;
+    info.check(id, bytes).map_err(anyhow::Error::msg)
+}

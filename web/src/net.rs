@@ -1,0 +1,146 @@
+//! The HTTP API from a page: manifest, cell graph, prefetch answers and segment batches, over
+//! the browser's `fetch` (same origin by default, so a page served by `portico serve` or by an
+//! nginx in front of it needs no CORS). Every error names the URL; `410 Gone` (the server now
+//! serves a rebuilt file) is [`Stale`].
+
+use anyhow::{Result, anyhow, bail};
+use js_sys::Uint8Array;
+use portico_data::cells::CellGraph;
+use portico_data::format::Header;
+use portico_protocol::{BINCODE_MIME, Manifest, PrefetchRequest, PrefetchResponse};
+use std::cell::RefCell;
+use wasm_bindgen::{JsCast, JsValue};
+use wasm_bindgen_futures::JsFuture;
+use web_sys::{Request, RequestInit, Response};
+
+/// The server no longer serves the database the page reads: walking on needs a reload.
+#[derive(Debug)]
+pub struct Stale(pub String);
+
+impl std::fmt::Display for Stale {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Stale {}
+
+/// A Portico server seen from the page.
+#[derive(Debug)]
+pub struct Remote {
+    base: String,
+    /// `/v1/db/{id}` once the manifest named the database (content-named segment URLs).
+    database: RefCell<Option<String>>,
+}
+
+/// A JavaScript exception or rejection in one line.
+pub fn js_error(e: &JsValue) -> String {
+    e.dyn_ref::<js_sys::Error>()
+        .map(|e| String::from(e.message()))
+        .or_else(|| e.as_string())
+        .unwrap_or_else(|| format!("{e:?}"))
+}
+
+impl Remote {
+    /// The server at `base` (`""`: the page's own origin).
+    pub fn new(base: &str) -> Remote {
+        Remote {
+            base: base.trim_end_matches('/').to_string(),
+            database: RefCell::new(None),
+        }
+    }
+
+    fn segments_base(&self) -> String {
+        match self.database.borrow().as_ref() {
+            Some(id) => format!("{}/v1/db/{id}", self.base),
+            None => format!("{}/v1", self.base),
+        }
+    }
+
+    async fn send(&self, url: &str, body: Option<&[u8]>, what: &str) -> Result<Vec<u8>> {
+        let init = RequestInit::new();
+        if let Some(b) = body {
+            init.set_method("POST");
+            let array = Uint8Array::from(b);
+            init.set_body(&array.into());
+        }
+        let req = Request::new_with_str_and_init(url, &init)
+            .map_err(|e| anyhow!("{url}: {}", js_error(&e)))?;
+        let headers = req.headers();
+        let _ = headers.set("accept", BINCODE_MIME);
+        if body.is_some() {
+            let _ = headers.set("content-type", BINCODE_MIME);
+        }
+        let window = web_sys::window().ok_or_else(|| anyhow!("no window"))?;
+        let resp: Response = JsFuture::from(window.fetch_with_request(&req))
+            .await
+            .map_err(|e| anyhow!("{url}: {what}: {}", js_error(&e)))?
+            .dyn_into()
+            .map_err(|_| anyhow!("{url}: {what}: not a response"))?;
+        let buffer = resp
+            .array_buffer()
+            .map_err(|e| anyhow!("{url}: {what}: {}", js_error(&e)))?;
+        let buffer = JsFuture::from(buffer)
+            .await
+            .map_err(|e| anyhow!("{url}: reading {what}: {}", js_error(&e)))?;
+        let bytes = Uint8Array::new(&buffer).to_vec();
+        if !resp.ok() {
+            let msg = serde_json::from_slice::<portico_protocol::ApiError>(&bytes)
+                .map(|e| e.message)
+                .unwrap_or_else(|_| String::from_utf8_lossy(&bytes).into_owned());
+            if resp.status() == 410 {
+                return Err(Stale(format!("{url}: {what}: {msg}")).into());
+            }
+            bail!("{url}: {what}: {} {msg}", resp.status());
+        }
+        Ok(bytes)
+    }
+
+    /// `GET /v1/manifest`, then `GET /v1/cells` when the model has cells.
+    pub async fn model(&self) -> Result<(Manifest<Header>, Option<CellGraph>)> {
+        let url = format!("{}/v1/manifest", self.base);
+        let b = self.send(&url, None, "manifest").await?;
+        let m: Manifest<Header> = portico_protocol::manifest_from_bincode(&b)
+            .map_err(|e| anyhow!("{url}: the manifest does not decode: {e}"))?;
+        *self.database.borrow_mut() = Some(m.database_id.clone());
+        let graph = match m.header.cells {
+            Some(_) => {
+                let url = format!("{}/v1/cells", self.base);
+                let b = self.send(&url, None, "cells").await?;
+                Some(
+                    portico_data::format::decode_segment(&b)
+                        .map_err(|e| anyhow!("{url}: the cell graph: {e}"))?,
+                )
+            }
+            None => None,
+        };
+        Ok((m, graph))
+    }
+
+    /// `POST /v1/db/{id}/prefetch`.
+    pub async fn prefetch(&self, req: &PrefetchRequest) -> Result<PrefetchResponse> {
+        let url = format!("{}/prefetch", self.segments_base());
+        let body = portico_protocol::to_bincode(req)?;
+        let b = self.send(&url, Some(&body), "prefetch").await?;
+        portico_protocol::from_bincode(&b).map_err(|e| anyhow!("{url}: the answer: {e}"))
+    }
+
+    /// `GET /v1/db/{id}/batch?ids=…`: the segments in the order asked; one the server could not
+    /// read fails alone.
+    pub async fn batch(&self, ids: &[u32]) -> Result<Vec<(u32, Result<Vec<u8>>)>> {
+        let list: Vec<String> = ids.iter().map(u32::to_string).collect();
+        let url = format!("{}/batch?ids={}", self.segments_base(), list.join(","));
+        let what = format!("batch of {} segments", ids.len());
+        let body = self.send(&url, None, &what).await?;
+        let parts = portico_protocol::batch::parse(&body).map_err(|e| anyhow!("{url}: {e}"))?;
+        Ok(parts
+            .into_iter()
+            .map(|(id, range)| {
+                let bytes = range
+                    .map(|r| body[r].to_vec())
+                    .ok_or_else(|| anyhow!("{url}: segment {id} is damaged on the server"));
+                (id, bytes)
+            })
+            .collect())
+    }
+}

@@ -1,0 +1,379 @@
+//! The page's side: reads the address, loads the model, starts wgpu on the canvas, wires the
+//! input events and runs the frame loop on `requestAnimationFrame`; [`Handle`] is what
+//! JavaScript (the page, a test) holds.
+
+use crate::input::Input;
+use crate::io::{Catalogue, Io};
+use crate::net::{Remote, js_error};
+use crate::viewer::{Model, SPEED, Stats, TURN, Viewer};
+use glam::Vec3;
+use portico_client::cache::{ObjectCache, split_budget};
+use portico_client::frame::Decider;
+use portico_client::navigate::Navigator;
+use portico_data::path::PathKind;
+use portico_protocol::Policy;
+use std::cell::RefCell;
+use std::rc::Rc;
+use wasm_bindgen::prelude::*;
+use web_sys::{HtmlCanvasElement, KeyboardEvent, PointerEvent};
+
+/// The running viewer, as JavaScript holds it (`const viewer = await start("canvas")`).
+#[wasm_bindgen]
+pub struct Handle {
+    viewer: Rc<RefCell<Viewer>>,
+    input: Rc<RefCell<Input>>,
+}
+
+#[wasm_bindgen]
+impl Handle {
+    /// The viewer's figures as JSON ([`Stats`]): frames, frame time, resident bytes of the
+    /// budget, objects and LODs skipped, bytes received, the first complete frame, errors.
+    pub fn stats(&self) -> String {
+        serde_json::to_string(&self.viewer.borrow().stats).unwrap_or_default()
+    }
+
+    /// Puts the eye at (x, y, z) looking along (dx, dy, dz) and stops the tour.
+    pub fn look(&self, x: f32, y: f32, z: f32, dx: f32, dy: f32, dz: f32) {
+        let mut v = self.viewer.borrow_mut();
+        v.touring = None;
+        v.nav = navigator(Vec3::new(x, y, z), Vec3::new(dx, dy, dz));
+    }
+
+    /// Starts (or with `false` stops) the model's standard tour.
+    pub fn tour(&self, on: bool) {
+        let mut v = self.viewer.borrow_mut();
+        let now = v.last_t.unwrap_or(0.0);
+        v.touring = (on && v.model.tour.is_some()).then_some(now);
+        self.input.borrow_mut().touched = false;
+    }
+}
+
+fn navigator(eye: Vec3, dir: Vec3) -> Navigator {
+    let mut nav = Navigator::new(eye, dir, SPEED, TURN);
+    nav.pitch = dir.normalize_or(Vec3::X).y.clamp(-1.0, 1.0).asin();
+    nav
+}
+
+/// Reads `name` from the page's query string.
+fn param(name: &str) -> Option<String> {
+    let search = web_sys::window()?.location().search().ok()?;
+    web_sys::UrlSearchParams::new_with_str(&search)
+        .ok()?
+        .get(name)
+}
+
+/// The viewpoint in the fragment (`#eye=x,y,z&dir=x,y,z`), if it has one.
+fn viewpoint_from_hash() -> Option<(Vec3, Vec3)> {
+    let hash = web_sys::window()?.location().hash().ok()?;
+    let params = web_sys::UrlSearchParams::new_with_str(hash.trim_start_matches('#')).ok()?;
+    let vec = |key: &str| -> Option<Vec3> {
+        let v: Vec<f32> = params
+            .get(key)?
+            .split(',')
+            .map(|s| s.trim().parse::<f32>())
+            .collect::<Result<_, _>>()
+            .ok()?;
+        (v.len() == 3 && v.iter().all(|c| c.is_finite())).then(|| Vec3::new(v[0], v[1], v[2]))
+    };
+    let dir = vec("dir")?;
+    (dir.length() > 1e-6).then_some((vec("eye")?, dir))
+}
+
+/// Loads the model from the server and starts the viewer on the canvas with id `canvas_id`;
+/// writes its figures four times a second into the element with id `overlay_id`, if any.
+///
+/// # Errors
+/// A one-line message (shown by the page) when the server cannot be reached, the manifest does
+/// not decode, or the browser has neither WebGPU nor WebGL2.
+#[wasm_bindgen]
+pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsValue> {
+    console_error_panic_hook::set_once();
+    let window = web_sys::window().ok_or("no window")?;
+    let document = window.document().ok_or("no document")?;
+    let canvas: HtmlCanvasElement = document
+        .get_element_by_id(&canvas_id)
+        .ok_or_else(|| format!("no element #{canvas_id}"))?
+        .dyn_into()
+        .map_err(|_| format!("#{canvas_id} is not a canvas"))?;
+    let server = param("server").unwrap_or_default();
+    let cache_mb: u64 = param("cache_mb").and_then(|s| s.parse().ok()).unwrap_or(64);
+    let budget_ms: f64 = param("budget_ms")
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(50.0);
+    let backend = param("backend").unwrap_or_else(|| "auto".into());
+
+    let remote = Rc::new(Remote::new(&server));
+    let (manifest, graph) = remote
+        .model()
+        .await
+        .map_err(|e| JsValue::from_str(&format!("{e:#}")))?;
+    let header = manifest.header;
+    let bounds: Vec<_> = header.instances.iter().map(|i| i.bounds).collect();
+    if let Some(h) = &header.hierarchy {
+        h.check(&bounds)
+            .map_err(|e| format!("the manifest's hierarchy: {e}"))?;
+    }
+    let tour = portico_data::path::standard(
+        graph.as_ref(),
+        &header.bounds,
+        &bounds,
+        PathKind::Tour,
+        6,
+        1,
+        SPEED,
+        TURN,
+    );
+    let stabs = header
+        .cells
+        .as_ref()
+        .map(|c| c.stab_segments.iter().copied().collect())
+        .unwrap_or_default();
+    let catalogue = Catalogue {
+        segments: manifest.segments,
+        decoded: header.decoded_sizes().collect(),
+    };
+
+    let ratio = window.device_pixel_ratio().max(1.0);
+    let (width, height) = canvas_size(&canvas, ratio);
+    let backends = match backend.as_str() {
+        "webgl" => wgpu::Backends::GL,
+        "webgpu" => wgpu::Backends::BROWSER_WEBGPU,
+        _ => wgpu::Backends::BROWSER_WEBGPU | wgpu::Backends::GL,
+    };
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    desc.backends = backends;
+    let instance = wgpu::util::new_instance_with_webgpu_detection(desc).await;
+    let surface = instance
+        .create_surface(wgpu::SurfaceTarget::Canvas(canvas.clone()))
+        .map_err(|e| format!("cannot draw on the canvas: {e}"))?;
+    let adapter = instance
+        .request_adapter(&wgpu::RequestAdapterOptions {
+            compatible_surface: Some(&surface),
+            ..Default::default()
+        })
+        .await
+        .map_err(|e| format!("this browser offers neither WebGPU nor WebGL2: {e}"))?;
+    let backend_name = format!("{:?}", adapter.get_info().backend);
+    let renderer = portico_render::Renderer::on_adapter(instance, &adapter, width, height, Some(1))
+        .await
+        .map_err(|e| format!("starting the renderer: {e}"))?;
+    let caps = surface.get_capabilities(&adapter);
+    let want = portico_render::COLOR_FORMAT;
+    let format = if caps.formats.contains(&want) {
+        want
+    } else {
+        caps.formats
+            .first()
+            .copied()
+            .ok_or("the canvas offers no surface format")?
+    };
+    let mut config = surface
+        .get_default_config(&adapter, width, height)
+        .ok_or("the canvas offers no surface format")?;
+    config.format = format;
+    config.view_formats = if format == want { vec![] } else { vec![want] };
+    config.present_mode = wgpu::PresentMode::AutoVsync;
+    surface.configure(renderer.device(), &config);
+
+    let (cache_bytes, window_bytes) = split_budget(cache_mb.max(1) << 20);
+    let policy = Policy {
+        cache_bytes,
+        screen: [width, height],
+        frame_time_s: (budget_ms / 1e3) as f32,
+        ..Policy::default()
+    };
+    let start_view = viewpoint_from_hash().or_else(|| tour.as_ref().map(|t| t.sample(0.0)));
+    let (eye, dir) = start_view.unwrap_or((Vec3::ZERO, Vec3::X));
+    let viewer = Viewer {
+        renderer,
+        surface,
+        config,
+        cache: ObjectCache::new(cache_bytes),
+        decider: Decider::new(
+            crate::viewer::ELISION,
+            budget_ms / 1e3,
+            Some(policy.size_threshold_px),
+        ),
+        cost: Default::default(),
+        io: Io::new(remote, catalogue, policy, window_bytes),
+        nav: navigator(eye, dir),
+        touring: None,
+        too_big: Default::default(),
+        stats: Stats {
+            cache_budget: cache_bytes,
+            backend: backend_name,
+            ..Stats::default()
+        },
+        recent: Default::default(),
+        last_t: None,
+        model: Model {
+            header,
+            graph,
+            bounds,
+            stabs,
+            tour,
+        },
+    };
+    let handle = Handle {
+        viewer: Rc::new(RefCell::new(viewer)),
+        input: Rc::new(RefCell::new(Input::default())),
+    };
+    listen(&window, &canvas, &handle.input)?;
+    let overlay = document.get_element_by_id(&overlay_id);
+    run_frames(handle.viewer.clone(), handle.input.clone(), canvas, overlay);
+    Ok(Handle {
+        viewer: handle.viewer,
+        input: handle.input,
+    })
+}
+
+/// The canvas's drawing-buffer size for its CSS size at `ratio` device pixels per CSS pixel.
+fn canvas_size(canvas: &HtmlCanvasElement, ratio: f64) -> (u32, u32) {
+    let w = ((canvas.client_width().max(16) as f64) * ratio).round() as u32;
+    let h = ((canvas.client_height().max(16) as f64) * ratio).round() as u32;
+    canvas.set_width(w);
+    canvas.set_height(h);
+    (w, h)
+}
+
+/// The pointer's position on the canvas, each coordinate -1..1 (y up).
+fn cursor(canvas: &HtmlCanvasElement, e: &PointerEvent) -> [f32; 2] {
+    let r = canvas.get_bounding_client_rect();
+    let x = ((e.client_x() as f64 - r.left()) / r.width().max(1.0)) * 2.0 - 1.0;
+    let y = 1.0 - ((e.client_y() as f64 - r.top()) / r.height().max(1.0)) * 2.0;
+    [x as f32, y as f32]
+}
+
+/// Keys on the window, the pointer (mouse, pen, touch) on the canvas.
+fn listen(
+    window: &web_sys::Window,
+    canvas: &HtmlCanvasElement,
+    input: &Rc<RefCell<Input>>,
+) -> Result<(), JsValue> {
+    let i = input.clone();
+    let down = Closure::<dyn FnMut(KeyboardEvent)>::new(move |e: KeyboardEvent| {
+        if i.borrow_mut().key_down(&e.code()) {
+            e.prevent_default();
+        }
+    });
+    window.add_event_listener_with_callback("keydown", down.as_ref().unchecked_ref())?;
+    down.forget();
+    let i = input.clone();
+    let up = Closure::<dyn FnMut(KeyboardEvent)>::new(move |e: KeyboardEvent| {
+        i.borrow_mut().key_up(&e.code());
+    });
+    window.add_event_listener_with_callback("keyup", up.as_ref().unchecked_ref())?;
+    up.forget();
+
+    let (i, c) = (input.clone(), canvas.clone());
+    let pdown = Closure::<dyn FnMut(PointerEvent)>::new(move |e: PointerEvent| {
+        let _ = c.set_pointer_capture(e.pointer_id());
+        i.borrow_mut()
+            .pointer_down(e.button(), cursor(&c, &e), e.ctrl_key());
+        e.prevent_default();
+    });
+    canvas.add_event_listener_with_callback("pointerdown", pdown.as_ref().unchecked_ref())?;
+    pdown.forget();
+    let (i, c) = (input.clone(), canvas.clone());
+    let pmove = Closure::<dyn FnMut(PointerEvent)>::new(move |e: PointerEvent| {
+        i.borrow_mut().pointer_move(cursor(&c, &e), e.ctrl_key());
+    });
+    canvas.add_event_listener_with_callback("pointermove", pmove.as_ref().unchecked_ref())?;
+    pmove.forget();
+    let i = input.clone();
+    let pup = Closure::<dyn FnMut(web_sys::Event)>::new(move |_e: web_sys::Event| {
+        i.borrow_mut().pointer_up();
+    });
+    for ev in ["pointerup", "pointercancel", "lostpointercapture"] {
+        canvas.add_event_listener_with_callback(ev, pup.as_ref().unchecked_ref())?;
+    }
+    pup.forget();
+    let menu = Closure::<dyn FnMut(web_sys::Event)>::new(|e: web_sys::Event| e.prevent_default());
+    canvas.add_event_listener_with_callback("contextmenu", menu.as_ref().unchecked_ref())?;
+    menu.forget();
+    Ok(())
+}
+
+/// Runs one frame per animation frame, forever; refreshes the overlay and the address's
+/// viewpoint a few times a second.
+fn run_frames(
+    viewer: Rc<RefCell<Viewer>>,
+    input: Rc<RefCell<Input>>,
+    canvas: HtmlCanvasElement,
+    overlay: Option<web_sys::Element>,
+) {
+    type Tick = Closure<dyn FnMut(f64)>;
+    let tick: Rc<RefCell<Option<Tick>>> = Rc::new(RefCell::new(None));
+    let again = tick.clone();
+    let mut last_overlay = 0.0f64;
+    *tick.borrow_mut() = Some(Closure::new(move |now: f64| {
+        {
+            let mut v = viewer.borrow_mut();
+            let ratio = web_sys::window().map_or(1.0, |w| w.device_pixel_ratio().max(1.0));
+            let (w, h) = (
+                ((canvas.client_width().max(16) as f64) * ratio).round() as u32,
+                ((canvas.client_height().max(16) as f64) * ratio).round() as u32,
+            );
+            if (w, h) != (v.config.width, v.config.height) {
+                canvas.set_width(w);
+                canvas.set_height(h);
+                v.resize(w, h);
+            }
+            v.frame(now, &mut input.borrow_mut());
+            if now - last_overlay > 250.0 {
+                last_overlay = now;
+                if let Some(o) = &overlay {
+                    o.set_text_content(Some(&overlay_text(&v.stats)));
+                }
+                share_viewpoint(&v.stats);
+            }
+        }
+        if let (Some(w), Some(cb)) = (web_sys::window(), again.borrow().as_ref()) {
+            if let Err(e) = w.request_animation_frame(cb.as_ref().unchecked_ref()) {
+                web_sys::console::error_1(&format!("portico: {}", js_error(&e)).into());
+            }
+        }
+    }));
+    if let (Some(w), Some(cb)) = (web_sys::window(), tick.borrow().as_ref()) {
+        let _ = w.request_animation_frame(cb.as_ref().unchecked_ref());
+    }
+}
+
+/// The overlay's lines.
+fn overlay_text(s: &Stats) -> String {
+    let mb = |b: u64| b as f64 / 1_048_576.0;
+    let mut t = format!(
+        "{:.1} ms/frame ({})\nresident {:.1} of {:.0} MB\nvisible {} objects, {} skipped, {} LODs coarser\n{} triangles\nreceived {} segments, {:.2} MB",
+        s.mean_frame_ms,
+        s.backend,
+        mb(s.resident_bytes),
+        mb(s.cache_budget),
+        s.visible_objects,
+        s.objects_skipped,
+        s.lods_skipped,
+        s.drawn_triangles,
+        s.segments_received,
+        s.bytes_received as f64 / 1e6,
+    );
+    if let Some(f) = s.first_complete_ms {
+        t += &format!("\nfirst complete frame after {:.0} ms", f);
+    }
+    if s.touring {
+        t += "\ntour (T stops)";
+    }
+    if let Some(e) = &s.last_error {
+        t += &format!("\n{} errors; last: {e}", s.failures);
+    }
+    t
+}
+
+/// Keeps the address's fragment at the viewpoint (without adding history entries).
+fn share_viewpoint(s: &Stats) {
+    let f = |v: [f32; 3]| format!("{:.2},{:.2},{:.2}", v[0], v[1], v[2]);
+    let hash = format!("#eye={}&dir={}", f(s.eye), f(s.dir));
+    if let Some(w) = web_sys::window()
+        && let Ok(h) = w.history()
+    {
+        let _ = h.replace_state_with_url(&JsValue::NULL, "", Some(&hash));
+    }
+}

@@ -1,0 +1,322 @@
+//! The page's frame loop (Funkhouser Ch. 6, one thread): take what the IO stage brought into
+//! the byte-budgeted cache → move the observer → the frame decision over resident LODs
+//! ([`portico_client::frame`]) → draw into the canvas's surface → tell the IO stage where the
+//! observer is. It never waits for the network: what has not arrived is skipped and counted.
+
+use crate::input::Input;
+use crate::io::{Arrival, Io};
+use glam::{Mat4, Vec3};
+use portico_client::cache::ObjectCache;
+use portico_client::cost::CostModel;
+use portico_client::elision::Algorithm;
+use portico_client::frame::{Decider, Scene};
+use portico_client::navigate::Navigator;
+use portico_client::view::{self, Viewpoint};
+use portico_data::cells::{CellGraph, StabList};
+use portico_data::format::Header;
+use portico_data::geometry::Aabb;
+use portico_data::path::CameraPath;
+use portico_protocol::Observer;
+use portico_render::{Draw, GpuMesh, Renderer};
+use serde::Serialize;
+use std::sync::Arc;
+
+/// Vertical field of view (radians), as `portico walk`'s default.
+pub const FOVY: f32 = 60.0 * std::f32::consts::PI / 180.0;
+/// Walking speed (m/s) and turn rate (rad/s) the observer announces (as `portico walk`).
+pub const SPEED: f32 = 2.0;
+/// See [`SPEED`].
+pub const TURN: f32 = 2.0;
+
+/// A resident segment.
+pub enum Resident {
+    Mesh(GpuMesh),
+    Stab(Arc<StabList>),
+}
+
+/// The model as the manifest describes it.
+pub struct Model {
+    pub header: Header,
+    pub graph: Option<CellGraph>,
+    pub bounds: Vec<Aabb>,
+    pub stabs: std::collections::HashSet<u32>,
+    /// The model's standard tour (or orbit and fly-through), where the view starts.
+    pub tour: Option<CameraPath>,
+}
+
+/// What the overlay shows and the tests read (`viewer.stats()` in JavaScript).
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Stats {
+    /// Frames drawn.
+    pub frames: u64,
+    /// The last frame's interval, milliseconds (what the person sees).
+    pub frame_ms: f64,
+    /// Mean frame interval over the last second, milliseconds.
+    pub mean_frame_ms: f64,
+    /// Bytes resident in the cache, and its budget.
+    pub resident_bytes: u64,
+    /// The cache's byte budget.
+    pub cache_budget: u64,
+    /// Most bytes the cache ever held.
+    pub cache_peak_bytes: u64,
+    /// Segments and bytes received (wire).
+    pub segments_received: u64,
+    /// See [`Stats::segments_received`].
+    pub bytes_received: u64,
+    /// Objects visible in the last frame, and how many of them had nothing resident.
+    pub visible_objects: u32,
+    /// See [`Stats::visible_objects`].
+    pub objects_skipped: u32,
+    /// LODs drawn coarser than the elision wanted, last frame.
+    pub lods_skipped: u32,
+    /// Triangles drawn, last frame.
+    pub drawn_triangles: u64,
+    /// The first frame with visible objects and none skipped, and its time since the page
+    /// began loading (ms, the page's `performance.now()`).
+    pub first_complete_frame: Option<u64>,
+    /// See [`Stats::first_complete_frame`].
+    pub first_complete_ms: Option<f64>,
+    /// Prefetch answers received (one request in flight at a time, one per frame at most).
+    pub answers: u64,
+    /// Requests that failed.
+    pub failures: u64,
+    /// The last failure.
+    pub last_error: Option<String>,
+    /// The eye and view direction.
+    pub eye: [f32; 3],
+    /// See [`Stats::eye`].
+    pub dir: [f32; 3],
+    /// The backend wgpu draws with (`Gl` is WebGL2, `BrowserWebGpu` is WebGPU).
+    pub backend: String,
+    /// Whether the standard tour drives the view.
+    pub touring: bool,
+}
+
+/// The viewer's state between frames.
+pub struct Viewer {
+    pub renderer: Renderer,
+    pub surface: wgpu::Surface<'static>,
+    pub config: wgpu::SurfaceConfiguration,
+    pub model: Model,
+    pub cache: ObjectCache<Resident>,
+    pub decider: Decider,
+    pub cost: CostModel,
+    pub io: Io,
+    pub nav: Navigator,
+    /// The tour and the time (s) it started, while it drives the view.
+    pub touring: Option<f64>,
+    /// Segments larger than the whole cache: reported as held so no answer lists them again.
+    pub too_big: std::collections::HashSet<u32>,
+    pub stats: Stats,
+    /// Recent frame intervals (ms), for the mean.
+    pub recent: std::collections::VecDeque<f64>,
+    pub last_t: Option<f64>,
+}
+
+impl Viewer {
+    /// Takes the IO stage's arrivals into the cache (never above its budget).
+    fn take_arrivals(&mut self) {
+        for a in self.io.take() {
+            match a {
+                Arrival::Segment(id, bytes, _listed) => {
+                    self.stats.segments_received += 1;
+                    self.stats.bytes_received += bytes.len() as u64;
+                    let made = if self.model.stabs.contains(&id) {
+                        portico_data::format::decode_segment::<StabList>(&bytes)
+                            .map(|l| (Resident::Stab(Arc::new(l)), bytes.len() as u64))
+                            .map_err(|e| format!("segment {id}: {e}"))
+                    } else {
+                        self.renderer
+                            .upload(&bytes)
+                            .map(|m| {
+                                let charge = m.gpu_bytes().max(bytes.len() as u64);
+                                (Resident::Mesh(m), charge)
+                            })
+                            .map_err(|e| format!("segment {id}: {e}"))
+                    };
+                    match made {
+                        Ok((value, charge)) => {
+                            if self.cache.insert(id, value, charge).is_err() {
+                                self.too_big.insert(id);
+                            }
+                        }
+                        Err(e) => self.fail(e),
+                    }
+                }
+                Arrival::Release(ids) => {
+                    self.stats.answers += 1;
+                    ids.iter().for_each(|&id| self.cache.demote(id));
+                }
+                Arrival::Failed(e) | Arrival::Stale(e) => self.fail(e),
+            }
+        }
+    }
+
+    fn fail(&mut self, e: String) {
+        self.stats.failures += 1;
+        web_sys::console::warn_1(&format!("portico: {e}").into());
+        self.stats.last_error = Some(e);
+    }
+
+    /// Resizes the surface and the renderer's targets to `width` x `height` device pixels.
+    pub fn resize(&mut self, width: u32, height: u32) {
+        if (width, height) == (self.config.width, self.config.height) || width == 0 || height == 0 {
+            return;
+        }
+        self.config.width = width;
+        self.config.height = height;
+        self.surface.configure(self.renderer.device(), &self.config);
+        if let Err(e) = self.renderer.resize(width, height) {
+            self.fail(format!("resize to {width}x{height}: {e}"));
+        }
+    }
+
+    /// One frame at `now_ms` (the page's clock): arrivals, movement, decision, draw, request.
+    pub fn frame(&mut self, now_ms: f64, input: &mut Input) {
+        let t = now_ms / 1e3;
+        let dt = self.last_t.map_or(0.0, |l| (t - l).clamp(0.0, 0.25));
+        if let Some(l) = self.last_t {
+            self.stats.frame_ms = (t - l) * 1e3;
+            self.recent.push_back(self.stats.frame_ms);
+            if self.recent.len() > 60 {
+                self.recent.pop_front();
+            }
+            self.stats.mean_frame_ms = self.recent.iter().sum::<f64>() / self.recent.len() as f64;
+        }
+        self.last_t = Some(t);
+        self.take_arrivals();
+
+        if std::mem::take(&mut input.toggle_tour) {
+            self.touring = match self.touring {
+                Some(_) => None,
+                None => self.model.tour.as_ref().map(|_| t),
+            };
+        }
+        if std::mem::take(&mut input.touched) {
+            self.touring = None;
+        }
+        let (eye, dir, velocity) = match (self.touring, &self.model.tour) {
+            (Some(start), Some(tour)) => {
+                let s = ((t - start) as f32) % tour.duration().max(1e-3);
+                let (eye, dir) = tour.sample(s);
+                let (next, _) = tour.sample(s + 0.05);
+                self.nav = Navigator::new(eye, dir, SPEED, TURN);
+                self.nav.pitch = dir.normalize_or(Vec3::X).y.clamp(-1.0, 1.0).asin();
+                (eye, dir, (next - eye) / 0.05)
+            }
+            _ => {
+                let v = input.apply(&mut self.nav, dt as f32);
+                (self.nav.eye, self.nav.dir(), v)
+            }
+        };
+        self.stats.touring = self.touring.is_some();
+        let size = (self.config.width, self.config.height);
+        let aspect = size.0 as f32 / size.1.max(1) as f32;
+        let obs = view::observer(eye, dir, velocity, FOVY, aspect, SPEED, TURN);
+        self.draw(&obs, size, now_ms);
+        let held: Vec<u32> = self
+            .cache
+            .ids()
+            .chain(self.too_big.iter().copied())
+            .collect();
+        self.io.pump(obs, held.into_iter());
+        self.stats.eye = eye.to_array();
+        self.stats.dir = dir.to_array();
+        self.stats.resident_bytes = self.cache.bytes();
+        self.stats.cache_peak_bytes = self.cache.peak_bytes();
+    }
+
+    fn draw(&mut self, obs: &Observer, size: (u32, u32), now_ms: f64) {
+        let view = Viewpoint::of(obs, size, view::far_plane(&self.model.header.bounds));
+        let scene = Scene {
+            header: &self.model.header,
+            graph: self.model.graph.as_ref(),
+            bounds: &self.model.bounds,
+        };
+        let last = (self.stats.frames > 0).then_some(self.stats.frame_ms / 1e3);
+        let d = self.decider.decide(
+            &scene,
+            &view,
+            &Cached(&self.cache, &scene),
+            &self.cost,
+            last,
+        );
+        self.stats.visible_objects = d.visible.objects.len() as u32;
+        self.stats.objects_skipped = d.frame.objects_skipped;
+        self.stats.lods_skipped = d.frame.lods_skipped;
+        if self.stats.first_complete_frame.is_none()
+            && !d.visible.objects.is_empty()
+            && d.frame.objects_skipped == 0
+        {
+            self.stats.first_complete_frame = Some(self.stats.frames);
+            self.stats.first_complete_ms = Some(now_ms);
+        }
+        let header = &self.model.header;
+        let mut draws = Vec::with_capacity(d.drawn.len());
+        for o in &d.drawn {
+            if let Some(Resident::Mesh(mesh)) = self.cache.get(o.segment) {
+                let inst = &header.instances[o.instance as usize];
+                let color = header
+                    .materials
+                    .get(inst.material as usize)
+                    .map_or([1.0; 4], |m| m.base_color);
+                draws.push(Draw {
+                    mesh,
+                    transform: Mat4::from_cols_array(&inst.transform),
+                    color,
+                });
+            }
+        }
+        let frame = match self.surface.get_current_texture() {
+            wgpu::CurrentSurfaceTexture::Success(f)
+            | wgpu::CurrentSurfaceTexture::Suboptimal(f) => f,
+            other => {
+                // Lost or outdated: configure again and draw the next frame.
+                tracing_free_warn(&format!("surface: {other:?}"));
+                self.surface.configure(self.renderer.device(), &self.config);
+                return;
+            }
+        };
+        let target = frame.texture.create_view(&wgpu::TextureViewDescriptor {
+            format: Some(portico_render::COLOR_FORMAT),
+            ..Default::default()
+        });
+        let view_proj = view.camera.view_proj(size.0 as f32 / size.1.max(1) as f32);
+        match self.renderer.render_into(view_proj, &draws, &[], &target) {
+            Ok(timing) => self.stats.drawn_triangles = timing.triangles,
+            Err(e) => {
+                let e = format!("drawing: {e}");
+                drop(draws);
+                self.fail(e);
+            }
+        }
+        self.renderer.queue().present(frame);
+        for &s in &d.touched {
+            self.cache.touch(s);
+        }
+        self.stats.frames += 1;
+    }
+}
+
+fn tracing_free_warn(msg: &str) {
+    web_sys::console::warn_1(&msg.into());
+}
+
+/// What the cache holds, as the frame decision asks it.
+struct Cached<'a>(&'a ObjectCache<Resident>, &'a Scene<'a>);
+
+impl portico_client::frame::Resident for Cached<'_> {
+    fn has(&self, id: u32) -> bool {
+        self.0.contains(id)
+    }
+
+    fn stab(&self, cell: u32) -> Option<Arc<StabList>> {
+        match self.0.get(self.1.stab_segment(cell)?) {
+            Some(Resident::Stab(l)) => Some(l.clone()),
+            _ => None,
+        }
+    }
+}
+
+/// The elision the viewer runs: cost/benefit optimisation at the frame budget (§4.2.3).
+pub const ELISION: Algorithm = Algorithm::Optimize;
