@@ -15,6 +15,8 @@ the bytes received until then, and the mean frame interval while the standard to
 import argparse
 import base64
 import json
+import os
+import signal
 import socket
 import subprocess
 import sys
@@ -57,11 +59,13 @@ def main():
     ap.add_argument("--seconds", type=float, default=20.0, help="how long the tour plays")
     ap.add_argument("--size", default="640x480", help="the canvas's size in CSS pixels")
     ap.add_argument("--query", default="backend=webgl", help="the page's query string")
-    ap.add_argument("--screenshot", help="save the page at the end of the tour here (PNG)")
+    ap.add_argument("--screenshot", help="save the canvas (with the overlay) at the end of the tour here (PNG)")
     a = ap.parse_args()
     w, h = (int(v) for v in a.size.split("x"))
     port = free_port()
-    driver = subprocess.Popen(["chromedriver", f"--port={port}"],
+    # A process group of its own: killing it ends every Chromium it started, however this
+    # script ends.
+    driver = subprocess.Popen(["chromedriver", f"--port={port}"], process_group=0,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     base = f"http://127.0.0.1:{port}"
     try:
@@ -135,12 +139,15 @@ def main():
             "errors": run("return window.porticoErrors || []"),
         }
         if a.screenshot:
+            view = call(base, "POST", f"{s}/element",
+                        {"using": "css selector", "value": "#view"})
+            eid = next(iter(view.values()))
             with open(a.screenshot, "wb") as f:
-                f.write(base64.b64decode(call(base, "GET", f"{s}/screenshot")))
+                f.write(base64.b64decode(call(base, "GET", f"{s}/element/{eid}/screenshot")))
         print(json.dumps(out, indent=2))
         call(base, "DELETE", s)
     finally:
-        driver.kill()
+        os.killpg(driver.pid, signal.SIGKILL)
 
 
 if __name__ == "__main__":

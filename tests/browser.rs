@@ -14,6 +14,7 @@ use fantoccini::{Client, ClientBuilder};
 use portico_server::{AppState, Config};
 use serde_json::{Value, json};
 use std::net::SocketAddr;
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
@@ -69,12 +70,17 @@ fn serve(
     (rx.recv().unwrap(), stop, thread)
 }
 
-/// chromedriver on a free port, killed when dropped.
+/// chromedriver on a free port in a process group of its own, killed with every Chromium it
+/// started when dropped (also when the test fails before closing its session: a browser left
+/// behind would keep drawing and take the CPU from every test after it).
 struct Driver(Child, u16);
 
 impl Drop for Driver {
     fn drop(&mut self) {
-        let _ = self.0.kill();
+        // SAFETY: kill(2) on the process group this test created; no memory is involved.
+        unsafe {
+            libc::kill(-(self.0.id() as i32), libc::SIGKILL);
+        }
         let _ = self.0.wait();
     }
 }
@@ -87,6 +93,7 @@ fn chromedriver() -> Driver {
         .port();
     let child = Command::new(CHROMEDRIVER)
         .arg(format!("--port={port}"))
+        .process_group(0)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -272,6 +279,8 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
         })
         .await;
         assert_eq!(s["backend"], "Gl", "WebGL2 was asked for: {s}");
+        assert_eq!(s["transport"], "stream", "segments are pushed by default: {s}");
+        assert_eq!(s["answers"], 0, "nothing was pulled while the stream worked: {s}");
         let before = s["eye"].clone();
         let frames = s["frames"].as_u64().unwrap();
         // The tour walks: frames go on and the eye moves.
@@ -343,10 +352,14 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
         tokio::time::sleep(Duration::from_secs(2)).await;
         let state = AppState::open(&db, config()).unwrap();
         let (_, stop, server) = serve(state, addr);
-        let answers = down["answers"].as_u64().unwrap();
-        let s = wait_for(&c, 90, "frames and answers after the restart", |s| {
+        // The stream closed with the server: the page pulls over HTTP meanwhile, then opens a
+        // new stream session.
+        let sessions = down["stream_sessions"].as_u64().unwrap();
+        let s = wait_for(&c, 90, "frames, answers and a new stream after the restart", |s| {
             s["frames"].as_u64() > down["frames"].as_u64().map(|f| f + 20)
-                && s["answers"].as_u64() > Some(answers + 2)
+                && s["answers"].as_u64() > Some(0)
+                && s["stream_sessions"].as_u64() > Some(sessions)
+                && s["transport"] == "stream"
         })
         .await;
         assert!(s["failures"].as_u64() > Some(0), "the restart went unnoticed: {s}");
@@ -356,6 +369,18 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
         );
         let errors = eval(&c, "return window.porticoErrors || []").await;
         assert_eq!(errors, json!([]), "the page logged errors");
+
+        // Pull only, as asked: the same building arrives through prefetch answers and batches.
+        c.goto(&format!("http://{addr}/?backend=webgl&transport=pull"))
+            .await
+            .unwrap();
+        let s = wait_for(&c, 90, "a complete frame, pulled", |s| {
+            s["first_complete_frame"].is_u64() && s["segments_received"].as_u64() > Some(3)
+        })
+        .await;
+        assert_eq!(s["transport"], "pull", "{s}");
+        assert_eq!(s["stream_sessions"], 0, "{s}");
+        assert!(s["answers"].as_u64() > Some(0), "{s}");
         c.close().await.unwrap();
         drop(stop);
         server.join().unwrap();

@@ -1,19 +1,32 @@
-//! The lookahead/IO stage in a page (Funkhouser Ch. 6 and §5.2.3): the same read
-//! [`Schedule`] as the native client's IO thread, run on the page's one thread. Requests are
-//! promises; what they bring waits in an inbox until the next frame takes it, so a frame never
-//! waits for the network. One prefetch request is in flight at a time (a newer observer waits
-//! for its answer) and up to [`PARALLEL`] segment batches.
+//! The lookahead/IO stage in a page (Funkhouser Ch. 6 and §5.2.3), on the page's one thread.
+//! What it brings waits in an inbox until the next frame takes it, so a frame never waits for
+//! the network. Two transports:
+//!
+//! - **push** (the default): one `/v1/stream` session ([`crate::stream`]); the observer goes
+//!   every frame, the server pushes in need order what the cache lacks;
+//! - **pull** (the fallback, and `?transport=pull`): the native client's read [`Schedule`] over
+//!   HTTP — one prefetch request in flight at a time (a newer observer waits for its answer)
+//!   and up to [`PARALLEL`] segment batches from the top of the latest answer.
+//!
+//! A stream that does not open within [`OPEN_WAIT`], or closes (a server restart), hands over
+//! to pull at once and is tried again after [`RETRY`].
 
 use crate::net::{Remote, Stale};
+use crate::stream::{Pushed, Stream};
 use portico_client::schedule::Schedule;
 use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
 use std::cell::RefCell;
 use std::collections::{HashMap, HashSet, VecDeque};
 use std::rc::Rc;
+use std::time::Duration;
 use web_time::Instant;
 
 /// Segment batches in flight at once (as the native client).
 pub const PARALLEL: usize = 8;
+/// How long a stream may take to open before pull takes over.
+pub const OPEN_WAIT: Duration = Duration::from_secs(2);
+/// How long after a stream failed another is tried.
+pub const RETRY: Duration = Duration::from_secs(5);
 
 /// What a finished request left in the inbox.
 enum Done {
@@ -57,13 +70,31 @@ pub struct Io {
     /// Events handed to the frame loop so far (the schedule's sequence numbers).
     seq: u64,
     stopped: bool,
+    /// Whether to push (else pull only), the session, when it was opened, and when the next
+    /// one may be.
+    push: bool,
+    stream: Option<(Stream, Instant)>,
+    retry_at: Option<Instant>,
+    /// Stream sessions opened so far.
+    pub sessions: u64,
 }
 
 impl Io {
     /// A stage reading from `remote` under `policy`, keeping at most `window` bytes in flight
     /// or delivered and not yet taken.
-    pub fn new(remote: Rc<Remote>, catalogue: Catalogue, policy: Policy, window: u64) -> Io {
+    /// With `push`, segments come over `/v1/stream` while it works.
+    pub fn new(
+        remote: Rc<Remote>,
+        catalogue: Catalogue,
+        policy: Policy,
+        window: u64,
+        push: bool,
+    ) -> Io {
         Io {
+            push,
+            stream: None,
+            retry_at: None,
+            sessions: 0,
             remote,
             catalogue: Rc::new(catalogue),
             policy,
@@ -135,7 +166,74 @@ impl Io {
         }
         // The frame loop takes every arrival at once.
         self.schedule.acknowledge(self.seq, true);
+        self.take_pushed(&mut out);
         out
+    }
+
+    /// What the stream pushed, checked like pulled segments; a closed stream hands over to
+    /// pull.
+    fn take_pushed(&mut self, out: &mut Vec<Arrival>) {
+        let Some((stream, _)) = &self.stream else {
+            return;
+        };
+        let now = Instant::now();
+        for p in stream.take() {
+            match p {
+                Pushed::Segment(id, bytes) => {
+                    match crate::verify(self.catalogue.segments.get(id as usize), id, &bytes) {
+                        Ok(()) => out.push(Arrival::Segment(id, bytes, now)),
+                        Err(e) => out.push(Arrival::Failed(format!("{e:#}"))),
+                    }
+                }
+                Pushed::Error(e) => out.push(Arrival::Failed(e)),
+            }
+        }
+        if let Some(why) = stream.closed() {
+            out.push(Arrival::Failed(format!("{why}; pulling over HTTP")));
+            self.stream = None;
+            self.retry_at = Some(now + RETRY);
+        }
+    }
+
+    /// Which transport brings segments now: `stream` or `pull`.
+    pub fn transport(&self) -> &'static str {
+        match &self.stream {
+            Some((s, _)) if s.is_open() => "stream",
+            _ => "pull",
+        }
+    }
+
+    /// Segments the cache released (the stream's server forgets it sent them).
+    pub fn evicted(&self, ids: Vec<u32>) {
+        if let Some((s, _)) = &self.stream {
+            s.evicted(ids);
+        }
+    }
+
+    /// Keeps a stream session going when pushing; `true` while it carries the segments (or
+    /// may still open), so pull stays idle.
+    fn pushing(&mut self, observer: Observer) -> bool {
+        if !self.push {
+            return false;
+        }
+        let now = Instant::now();
+        if self.stream.is_none() && self.retry_at.is_none_or(|t| now >= t) {
+            match Stream::open(self.remote.base(), self.policy) {
+                Ok(s) => {
+                    self.stream = Some((s, now));
+                    self.sessions += 1;
+                }
+                Err(_) => self.retry_at = Some(now + RETRY),
+            }
+        }
+        match &self.stream {
+            Some((s, _)) if s.is_open() => {
+                s.observe(observer);
+                true
+            }
+            Some((_, since)) => now.duration_since(*since) < OPEN_WAIT,
+            None => false,
+        }
     }
 
     fn failure(&mut self, e: anyhow::Error) -> Arrival {
@@ -150,7 +248,7 @@ impl Io {
     /// up to [`PARALLEL`] batches in flight from the top of the latest read list. `held`: the
     /// segments resident in the cache.
     pub fn pump(&mut self, observer: Observer, held: impl Iterator<Item = u32>) {
-        if self.stopped {
+        if self.stopped || self.pushing(observer) {
             return;
         }
         if !self.asking {

@@ -2,14 +2,16 @@
 //!
 //! The same client core as the native walker ([`portico_client`]: the LRU cache under a byte
 //! budget, visibility through the cells, detail elision over resident LODs, the read schedule)
-//! and the same renderer ([`portico_render`], wgpu on WebGPU where the browser has an adapter,
-//! else WebGL2), compiled to wasm32 and fetching from a Portico server over HTTP: prefetch
-//! answers (Funkhouser §5.2) and segment batches. `portico serve` serves the page at `/`;
-//! `web/build.sh` builds it.
+//! and the same renderer (`portico_render`, wgpu on WebGPU where the browser has an adapter,
+//! else WebGL2), compiled to wasm32 and fetching from a Portico server: segments pushed in need
+//! order over the `/v1/stream` WebSocket, or pulled over HTTP (prefetch answers, Funkhouser
+//! §5.2, and segment batches) when the stream is unavailable. `portico serve` serves the page
+//! at `/`; `web/build.sh` builds it.
 //!
 //! Query parameters of the page: `server` (another origin's server; default the page's own),
 //! `cache_mb` (the byte budget, default 64), `budget_ms` (the frame budget, default 50),
-//! `backend` (`webgl`, `webgpu` or `auto`, the default). The fragment holds the viewpoint
+//! `backend` (`webgl`, `webgpu` or `auto`, the default), `transport` (`stream`, the default, or
+//! `pull`). The fragment holds the viewpoint
 //! (`#eye=x,y,z&dir=x,y,z`), kept up to date so the address shares what one sees.
 //!
 //! Natively only [`input`] is compiled (and tested); everything else is for `wasm32`.
@@ -21,6 +23,8 @@ mod io;
 mod net;
 #[cfg(target_arch = "wasm32")]
 mod page;
+#[cfg(target_arch = "wasm32")]
+mod stream;
 #[cfg(target_arch = "wasm32")]
 mod viewer;
 

@@ -50,6 +50,11 @@ impl Remote {
         }
     }
 
+    /// The server's base URL (`""`: the page's origin).
+    pub fn base(&self) -> &str {
+        &self.base
+    }
+
     fn segments_base(&self) -> String {
         match self.database.borrow().as_ref() {
             Some(id) => format!("{}/v1/db/{id}", self.base),

@@ -101,6 +101,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         .and_then(|s| s.parse().ok())
         .unwrap_or(50.0);
     let backend = param("backend").unwrap_or_else(|| "auto".into());
+    let push = param("transport").as_deref() != Some("pull");
 
     let remote = Rc::new(Remote::new(&server));
     let (manifest, graph) = remote
@@ -195,7 +196,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
             Some(policy.size_threshold_px),
         ),
         cost: Default::default(),
-        io: Io::new(remote, catalogue, policy, window_bytes),
+        io: Io::new(remote, catalogue, policy, window_bytes, push),
         nav: navigator(eye, dir),
         touring: None,
         too_big: Default::default(),
@@ -343,9 +344,10 @@ fn run_frames(
 fn overlay_text(s: &Stats) -> String {
     let mb = |b: u64| b as f64 / 1_048_576.0;
     let mut t = format!(
-        "{:.1} ms/frame ({})\nresident {:.1} of {:.0} MB\nvisible {} objects, {} skipped, {} LODs coarser\n{} triangles\nreceived {} segments, {:.2} MB",
+        "{:.1} ms/frame ({}, {})\nresident {:.1} of {:.0} MB\nvisible {} objects, {} skipped, {} LODs coarser\n{} triangles\nreceived {} segments, {:.2} MB",
         s.mean_frame_ms,
         s.backend,
+        s.transport,
         mb(s.resident_bytes),
         mb(s.cache_budget),
         s.visible_objects,

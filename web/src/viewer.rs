@@ -90,6 +90,10 @@ pub struct Stats {
     pub backend: String,
     /// Whether the standard tour drives the view.
     pub touring: bool,
+    /// How segments come now: `stream` (pushed) or `pull` (HTTP).
+    pub transport: &'static str,
+    /// Stream sessions opened so far.
+    pub stream_sessions: u64,
 }
 
 /// The viewer's state between frames.
@@ -135,12 +139,16 @@ impl Viewer {
                             .map_err(|e| format!("segment {id}: {e}"))
                     };
                     match made {
-                        Ok((value, charge)) => {
-                            if self.cache.insert(id, value, charge).is_err() {
+                        Ok((value, charge)) => match self.cache.insert(id, value, charge) {
+                            Ok(released) => self.io.evicted(released),
+                            Err(_) => {
                                 self.too_big.insert(id);
                             }
+                        },
+                        Err(e) => {
+                            self.io.evicted(vec![id]);
+                            self.fail(e);
                         }
-                        Err(e) => self.fail(e),
                     }
                 }
                 Arrival::Release(ids) => {
@@ -220,6 +228,8 @@ impl Viewer {
             .chain(self.too_big.iter().copied())
             .collect();
         self.io.pump(obs, held.into_iter());
+        self.stats.transport = self.io.transport();
+        self.stats.stream_sessions = self.io.sessions;
         self.stats.eye = eye.to_array();
         self.stats.dir = dir.to_array();
         self.stats.resident_bytes = self.cache.bytes();

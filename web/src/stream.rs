@@ -1,0 +1,178 @@
+//! Server push over `/v1/stream` from a page: one WebSocket; `Hello` with the policy when it
+//! opens, the observer every frame, and the segments the client's cache released as
+//! `Evicted`, so the server's mirror of the cache stays true and nothing is sent twice. The
+//! server pushes segments in need order (Funkhouser §5.2.3) no further than the cache holds.
+//! Frames arrive on the socket's callback and wait in an inbox for the next animation frame.
+
+use portico_protocol::{
+    Observer, PROTOCOL_VERSION, Policy, ServerFrame, StreamClient, StreamServer, parse_server_frame,
+};
+use std::cell::{Cell, RefCell};
+use std::collections::VecDeque;
+use std::rc::Rc;
+use wasm_bindgen::prelude::*;
+use web_sys::{BinaryType, CloseEvent, MessageEvent, WebSocket};
+
+/// Most bytes waiting in the socket's send buffer before an observer is skipped (the server
+/// only computes the latest one anyway).
+const SEND_BACKLOG: u32 = 64 << 10;
+
+/// What the socket brought.
+pub enum Pushed {
+    /// A segment (unchecked).
+    Segment(u32, Vec<u8>),
+    /// The server reported a problem with a message; the session goes on.
+    Error(String),
+}
+
+/// One stream session.
+pub struct Stream {
+    ws: WebSocket,
+    inbox: Rc<RefCell<VecDeque<Pushed>>>,
+    open: Rc<Cell<bool>>,
+    /// Why the socket closed, once it has.
+    closed: Rc<RefCell<Option<String>>>,
+    _callbacks: Vec<Closure<dyn FnMut(JsValue)>>,
+}
+
+/// The stream's URL for an API base (`""`: the page's origin).
+fn url(base: &str) -> Result<String, String> {
+    let http = if base.is_empty() {
+        web_sys::window()
+            .ok_or("no window")?
+            .location()
+            .origin()
+            .map_err(|e| crate::net::js_error(&e))?
+    } else {
+        base.to_string()
+    };
+    let ws = if let Some(rest) = http.strip_prefix("https://") {
+        format!("wss://{rest}")
+    } else if let Some(rest) = http.strip_prefix("http://") {
+        format!("ws://{rest}")
+    } else {
+        return Err(format!("{http}: not an http(s) address"));
+    };
+    Ok(format!("{}/v1/stream", ws.trim_end_matches('/')))
+}
+
+impl Stream {
+    /// Opens a session with the server at `base`; `Hello` goes as soon as it opens.
+    pub fn open(base: &str, policy: Policy) -> Result<Stream, String> {
+        let url = url(base)?;
+        let ws =
+            WebSocket::new(&url).map_err(|e| format!("{url}: {}", crate::net::js_error(&e)))?;
+        ws.set_binary_type(BinaryType::Arraybuffer);
+        let inbox = Rc::new(RefCell::new(VecDeque::new()));
+        let open = Rc::new(Cell::new(false));
+        let closed = Rc::new(RefCell::new(None));
+        let mut callbacks = Vec::new();
+
+        let (o, socket) = (open.clone(), ws.clone());
+        let hello = portico_protocol::to_bincode(&StreamClient::Hello {
+            version: PROTOCOL_VERSION,
+            policy,
+            rate_bytes_per_s: u64::MAX / 2,
+        })
+        .map_err(|e| e.to_string())?;
+        let on_open = Closure::<dyn FnMut(JsValue)>::new(move |_| {
+            o.set(socket.send_with_u8_array(&hello).is_ok());
+        });
+        ws.set_onopen(Some(on_open.as_ref().unchecked_ref()));
+        callbacks.push(on_open);
+
+        let i = inbox.clone();
+        let on_message = Closure::<dyn FnMut(JsValue)>::new(move |e: JsValue| {
+            let Ok(e) = e.dyn_into::<MessageEvent>() else {
+                return;
+            };
+            let Ok(buf) = e.data().dyn_into::<js_sys::ArrayBuffer>() else {
+                return;
+            };
+            let bytes = js_sys::Uint8Array::new(&buf).to_vec();
+            let pushed = match parse_server_frame(&bytes) {
+                Ok(ServerFrame::Segment(id, b)) => Pushed::Segment(id, b.to_vec()),
+                Ok(ServerFrame::Control(StreamServer::Dropped(_))) => return,
+                Ok(ServerFrame::Control(StreamServer::Error(e))) => {
+                    Pushed::Error(format!("stream: {}: {}", e.code, e.message))
+                }
+                Err(e) => Pushed::Error(format!("stream: a frame does not decode: {e}")),
+            };
+            i.borrow_mut().push_back(pushed);
+        });
+        ws.set_onmessage(Some(on_message.as_ref().unchecked_ref()));
+        callbacks.push(on_message);
+
+        let (o, c, u) = (open.clone(), closed.clone(), url.clone());
+        let on_close = Closure::<dyn FnMut(JsValue)>::new(move |e: JsValue| {
+            o.set(false);
+            let why = e
+                .dyn_into::<CloseEvent>()
+                .map(|e| format!("{u}: closed ({}{})", e.code(), reason(&e.reason())))
+                .unwrap_or_else(|_| format!("{u}: closed"));
+            c.borrow_mut().get_or_insert(why);
+        });
+        ws.set_onclose(Some(on_close.as_ref().unchecked_ref()));
+        callbacks.push(on_close);
+
+        Ok(Stream {
+            ws,
+            inbox,
+            open,
+            closed,
+            _callbacks: callbacks,
+        })
+    }
+
+    /// Whether the session is open (Hello sent).
+    pub fn is_open(&self) -> bool {
+        self.open.get()
+    }
+
+    /// Why the session ended, once it has.
+    pub fn closed(&self) -> Option<String> {
+        self.closed.borrow().clone()
+    }
+
+    /// What arrived since the last call.
+    pub fn take(&self) -> Vec<Pushed> {
+        self.inbox.borrow_mut().drain(..).collect()
+    }
+
+    fn send(&self, msg: &StreamClient) {
+        if let Ok(bytes) = portico_protocol::to_bincode(msg) {
+            let _ = self.ws.send_with_u8_array(&bytes);
+        }
+    }
+
+    /// This frame's observer (skipped while the socket's send buffer is backed up).
+    pub fn observe(&self, obs: Observer) {
+        if self.is_open() && self.ws.buffered_amount() < SEND_BACKLOG {
+            self.send(&StreamClient::Observer(obs));
+        }
+    }
+
+    /// Segments the cache released: the server's mirror forgets them.
+    pub fn evicted(&self, ids: Vec<u32>) {
+        if self.is_open() && !ids.is_empty() {
+            self.send(&StreamClient::Evicted(ids));
+        }
+    }
+}
+
+fn reason(r: &str) -> String {
+    if r.is_empty() {
+        String::new()
+    } else {
+        format!(", {r}")
+    }
+}
+
+impl Drop for Stream {
+    fn drop(&mut self) {
+        self.ws.set_onopen(None);
+        self.ws.set_onmessage(None);
+        self.ws.set_onclose(None);
+        let _ = self.ws.close();
+    }
+}
