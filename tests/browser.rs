@@ -292,6 +292,19 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
         let png = c.screenshot().await.unwrap();
         let drawn = not_sky(&png);
         assert!(drawn > 0.05, "the frame is all sky ({drawn:.3} drawn): {s}");
+        // The mini-map shows the storey's cells and the observer (its red marker).
+        let map = eval(
+            &c,
+            "const m = document.getElementById('map'); \
+             const d = m.getContext('2d').getImageData(0, 0, m.width, m.height).data; \
+             let observer = 0, cells = 0; \
+             for (let i = 0; i < d.length; i += 4) { \
+               if (d[i] > 200 && d[i + 1] < 120 && d[i + 2] < 100) observer++; \
+               else if (d[i] > 90 && d[i + 1] > 90 && d[i + 2] > 90) cells++; } \
+             return [observer, cells];",
+        )
+        .await;
+        assert!(map[0].as_u64() > Some(10) && map[1].as_u64() > Some(100), "the mini-map: {map}");
         // The address holds the viewpoint.
         let url = c.current_url().await.unwrap();
         assert!(url.fragment().is_some_and(|f| f.starts_with("eye=")), "{url}");
@@ -305,7 +318,7 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
             .flat_map(|v| v.as_array().unwrap().iter().map(|x| x.to_string()))
             .collect();
         eval(&c, &format!("window.portico.look({})", args.join(","))).await;
-        eval(&c, "document.getElementById('stats').style.display='none'; document.getElementById('help').style.display='none';").await;
+        eval(&c, "for (const id of ['stats', 'help', 'map']) document.getElementById(id).style.display = 'none';").await;
         let frames = stats(&c).await["frames"].as_u64().unwrap();
         wait_for(&c, 60, "a complete frame where the tour stood", |s| {
             s["frames"].as_u64() > Some(frames + 5)

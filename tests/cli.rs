@@ -255,6 +255,9 @@ fn serve_picks_up_a_rebuilt_file_on_sighup_and_stops_on_sigterm() {
         .unwrap();
     let lines = stderr_lines(&mut child);
     let first = next_line(&lines);
+    // Then where the browser viewer is (or how to build it).
+    let viewer = next_line(&lines);
+    assert!(viewer.contains("browser viewer"), "{viewer}");
     let addr = first.rsplit("http://").next().unwrap().trim().to_string();
     let before = database_id(&addr).expect("manifest");
     // A damaged file renamed over the served one: the reload fails, says so in one line, and
@@ -357,6 +360,9 @@ fn sighup_with_a_slow_reader_stalls_nobody_and_says_what_it_did() {
         .unwrap();
     let lines = stderr_lines(&mut child);
     let first = next_line(&lines);
+    // Then where the browser viewer is (or how to build it).
+    let viewer = next_line(&lines);
+    assert!(viewer.contains("browser viewer"), "{viewer}");
     let addr = first.rsplit("http://").next().unwrap().trim().to_string();
     let before = database_id(&addr).expect("manifest");
     // A slow reader: a batch of the biggest segment a thousand times over, never read.

@@ -2,17 +2,21 @@
 //! mouse and keyboard as Funkhouser §3.3.1 describes ([`portico_client::navigate`]), optionally recording
 //! the walk as a path (`--record`) that `portico walk --path` and `portico bench` replay.
 //!
-//! Frames are rendered by the same offscreen [`portico_render::Renderer`] as headless walks and
-//! shown through a software framebuffer (softbuffer), so the window works wherever the headless
-//! client does (llvmpipe included) at the price of one read-back per frame. The frame loop
-//! never waits for the network, exactly as in [`crate::walk`]; frames are paced to the budget.
+//! Frames are drawn by the same [`portico_render::Renderer`] as headless walks, straight into
+//! the window's wgpu surface ([`Session::frame_into`]: no read-back). Where no surface works
+//! (no adapter can present to this window) they are drawn offscreen, read back and shown
+//! through a software framebuffer (softbuffer), so the window works wherever the headless
+//! client does. The frame loop never waits for the network, exactly as in [`crate::walk`];
+//! frames are paced to the budget.
 
 use crate::walk::{Session, WalkConfig, WalkSummary};
 use anyhow::{Context as _, Result};
 use portico_client::navigate::{Controls, Navigator, Recorder, Step};
+use portico_render::wgpu;
+use portico_render::{COLOR_FORMAT, Renderer};
 use std::num::NonZeroU32;
 use std::path::PathBuf;
-use std::rc::Rc;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 use winit::application::ApplicationHandler;
 use winit::dpi::{PhysicalPosition, PhysicalSize};
@@ -35,13 +39,12 @@ pub fn run(cfg: &WalkConfig, opts: &WindowOptions) -> Result<WalkSummary> {
         std::fs::create_dir_all(out.join("frames"))
             .with_context(|| format!("creating {}", out.display()))?;
     }
-    let session = Session::open(cfg)?;
     let (eye, dir) = cfg.path.sample(0.0);
     let nav = Navigator::new(eye, dir, cfg.max_speed, cfg.max_turn);
     let event_loop = EventLoop::new().context("opening the display (is DISPLAY set?)")?;
     let mut app = App {
         cfg,
-        session: Some(session),
+        session: None,
         nav,
         controls: Controls::default(),
         recorder: Recorder::default(),
@@ -49,6 +52,7 @@ pub fn run(cfg: &WalkConfig, opts: &WindowOptions) -> Result<WalkSummary> {
         started: Instant::now(),
         last: Instant::now(),
         next_frame: Instant::now(),
+        frames: 0,
         error: None,
     };
     event_loop
@@ -64,15 +68,28 @@ pub fn run(cfg: &WalkConfig, opts: &WindowOptions) -> Result<WalkSummary> {
     }
     app.session
         .take()
-        .context("the session ended early")?
+        .context("the window closed before the walk started")?
         .finish()
+}
+
+/// How frames reach the window.
+enum Show {
+    /// Drawn straight into the window's surface.
+    Surface {
+        surface: wgpu::Surface<'static>,
+        config: wgpu::SurfaceConfiguration,
+    },
+    /// Drawn offscreen, read back and copied into a software framebuffer.
+    Framebuffer {
+        surface: softbuffer::Surface<Arc<Window>, Arc<Window>>,
+        _context: softbuffer::Context<Arc<Window>>,
+    },
 }
 
 /// The window and what shows the frames in it.
 struct View {
-    window: Rc<Window>,
-    surface: softbuffer::Surface<Rc<Window>, Rc<Window>>,
-    _context: softbuffer::Context<Rc<Window>>,
+    window: Arc<Window>,
+    show: Show,
 }
 
 struct App<'a> {
@@ -85,32 +102,81 @@ struct App<'a> {
     started: Instant,
     last: Instant,
     next_frame: Instant,
+    frames: u64,
     error: Option<anyhow::Error>,
 }
 
+/// A renderer on an adapter that can present to `window`, and the window's surface configured
+/// for it.
+fn surface_renderer(
+    window: &Arc<Window>,
+    (w, h): (u32, u32),
+) -> Result<(Renderer, wgpu::Surface<'static>, wgpu::SurfaceConfiguration)> {
+    let desc = wgpu::InstanceDescriptor::new_with_display_handle_from_env(Box::new(window.clone()));
+    let instance = wgpu::Instance::new(desc);
+    let surface = instance.create_surface(window.clone())?;
+    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+        compatible_surface: Some(&surface),
+        ..Default::default()
+    }))?;
+    let mut config = surface
+        .get_default_config(&adapter, w, h)
+        .context("the adapter cannot present to this window")?;
+    let formats = surface.get_capabilities(&adapter).formats;
+    if !formats.contains(&COLOR_FORMAT) {
+        let plain = COLOR_FORMAT.remove_srgb_suffix();
+        anyhow::ensure!(
+            formats.contains(&plain),
+            "the window offers none of {COLOR_FORMAT:?}, {plain:?}"
+        );
+        config.format = plain;
+        config.view_formats = vec![COLOR_FORMAT];
+    } else {
+        config.format = COLOR_FORMAT;
+    }
+    let renderer = pollster::block_on(Renderer::on_adapter(instance, &adapter, w, h, None))?;
+    surface.configure(renderer.device(), &config);
+    Ok((renderer, surface, config))
+}
+
 impl App<'_> {
+    /// Opens the window, then the session on a renderer that presents to it (or, failing
+    /// that, on an offscreen one with a software framebuffer).
     fn open(&mut self, el: &ActiveEventLoop) -> Result<()> {
         let (w, h) = self.cfg.size;
         let attrs = Window::default_attributes()
             .with_title("Portico")
             .with_inner_size(PhysicalSize::new(w, h))
             .with_resizable(false);
-        let window = Rc::new(el.create_window(attrs).context("creating the window")?);
-        let context = softbuffer::Context::new(window.clone())
-            .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
-        let mut surface = softbuffer::Surface::new(&context, window.clone())
-            .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
-        let (nw, nh) = (NonZeroU32::new(w.max(1)), NonZeroU32::new(h.max(1)));
-        if let (Some(nw), Some(nh)) = (nw, nh) {
-            surface
-                .resize(nw, nh)
-                .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
-        }
-        self.view = Some(View {
-            window,
-            surface,
-            _context: context,
-        });
+        let window = Arc::new(el.create_window(attrs).context("creating the window")?);
+        let (session, show) = match surface_renderer(&window, (w, h)) {
+            Ok((renderer, surface, config)) => (
+                Session::open_on(self.cfg, renderer)?,
+                Show::Surface { surface, config },
+            ),
+            Err(e) => {
+                eprintln!("no wgpu surface for the window ({e:#}): frames are read back instead");
+                let context = softbuffer::Context::new(window.clone())
+                    .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
+                let mut surface = softbuffer::Surface::new(&context, window.clone())
+                    .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
+                if let (Some(nw), Some(nh)) = (NonZeroU32::new(w.max(1)), NonZeroU32::new(h.max(1)))
+                {
+                    surface
+                        .resize(nw, nh)
+                        .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
+                }
+                (
+                    Session::open(self.cfg)?,
+                    Show::Framebuffer {
+                        surface,
+                        _context: context,
+                    },
+                )
+            }
+        };
+        self.session = Some(session);
+        self.view = Some(View { window, show });
         Ok(())
     }
 
@@ -124,22 +190,48 @@ impl App<'_> {
         self.recorder.note(t as f32, self.nav.eye, self.nav.dir());
         let session = self.session.as_mut().context("no session")?;
         let obs = session.observer(self.nav.eye, self.nav.dir(), velocity);
-        let frame = session.frame(t, &obs)?.frame;
-        if self.cfg.png_every > 0 && frame % self.cfg.png_every == 0 {
+        let frame = self.frames;
+        let png = self.cfg.png_every > 0 && frame.is_multiple_of(self.cfg.png_every);
+        if png {
+            session.want_picture();
+        }
+        let view = self.view.as_mut().context("no window")?;
+        match &mut view.show {
+            Show::Surface { surface, config } => {
+                let texture = match surface.get_current_texture() {
+                    wgpu::CurrentSurfaceTexture::Success(t)
+                    | wgpu::CurrentSurfaceTexture::Suboptimal(t) => t,
+                    // Lost, outdated or timed out: configure again and draw the next frame.
+                    _ => {
+                        surface.configure(session.renderer().device(), config);
+                        return Ok(frame);
+                    }
+                };
+                let target = texture.texture.create_view(&wgpu::TextureViewDescriptor {
+                    format: Some(COLOR_FORMAT),
+                    ..Default::default()
+                });
+                session.frame_into(t, &obs, &target)?;
+                session.renderer().queue().present(texture);
+            }
+            Show::Framebuffer { surface, .. } => {
+                session.frame(t, &obs)?;
+                let img = session.image()?;
+                let mut buf = surface
+                    .buffer_mut()
+                    .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
+                for (dst, p) in buf.iter_mut().zip(img.pixels()) {
+                    *dst = u32::from(p[0]) << 16 | u32::from(p[1]) << 8 | u32::from(p[2]);
+                }
+                buf.present()
+                    .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
+            }
+        }
+        if png {
             session.save_png(frame)?;
         }
-        let img = session.image()?;
-        let view = self.view.as_mut().context("no window")?;
-        let mut buf = view
-            .surface
-            .buffer_mut()
-            .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
-        for (dst, p) in buf.iter_mut().zip(img.pixels()) {
-            *dst = u32::from(p[0]) << 16 | u32::from(p[1]) << 8 | u32::from(p[2]);
-        }
-        buf.present()
-            .map_err(|e| anyhow::anyhow!("window framebuffer: {e}"))?;
-        Ok(frame + 1)
+        self.frames += 1;
+        Ok(self.frames)
     }
 
     fn fail(&mut self, el: &ActiveEventLoop, e: anyhow::Error) {

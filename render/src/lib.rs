@@ -34,6 +34,8 @@ pub use mesh::{GpuMesh, Uploader};
 pub use portico_client::view::Camera;
 pub use renderer::Renderer;
 pub use textured::GpuImpostor;
+/// The wgpu this renderer draws with, for callers that give it a surface.
+pub use wgpu;
 
 use glam::Mat4;
 pub(crate) use renderer::{extent, scoped};

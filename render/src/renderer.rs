@@ -286,10 +286,11 @@ impl Renderer {
     }
 
     /// Draws one frame of `draws` and `boxes` with `view_proj` into `target` (a surface's
-    /// texture of [`crate::COLOR_FORMAT`] and the renderer's size) and submits it without waiting
-    /// for the GPU: the window and the browser present frames this way, with no read-back.
-    /// [`FrameTiming::total_s`] is then the time to submit; the caller measures the frame
-    /// interval. With MSAA the samples are resolved into `target`.
+    /// texture of [`crate::COLOR_FORMAT`] and the renderer's size): the window and the browser
+    /// present frames this way, with no read-back. Natively it waits for the GPU, so
+    /// [`FrameTiming::total_s`] is the frame's time as with [`Renderer::render`]; in a browser
+    /// it returns once submitted (the page measures its frame interval). With MSAA the samples
+    /// are resolved into `target`.
     ///
     /// # Errors
     /// [`RenderError::TooLarge`] when the draws outgrow the device's buffers; natively, a GPU
@@ -307,7 +308,11 @@ impl Renderer {
             self.submit_frame(view_proj, draws, boxes, target)
         })??;
         timing.cpu_submit_s = start.elapsed().as_secs_f64();
-        timing.total_s = timing.cpu_submit_s;
+        // Natively the frame time feeds the cost model, so wait for the GPU as `render` does;
+        // a page may not block, and measures its frame interval instead.
+        #[cfg(not(target_arch = "wasm32"))]
+        self.device.poll(wgpu::PollType::wait_indefinitely())?;
+        timing.total_s = start.elapsed().as_secs_f64();
         Ok(timing)
     }
 

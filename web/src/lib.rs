@@ -20,6 +20,8 @@ pub mod input;
 #[cfg(target_arch = "wasm32")]
 mod io;
 #[cfg(target_arch = "wasm32")]
+mod minimap;
+#[cfg(target_arch = "wasm32")]
 mod net;
 #[cfg(target_arch = "wasm32")]
 mod page;

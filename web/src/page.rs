@@ -80,7 +80,8 @@ fn viewpoint_from_hash() -> Option<(Vec3, Vec3)> {
 }
 
 /// Loads the model from the server and starts the viewer on the canvas with id `canvas_id`;
-/// writes its figures four times a second into the element with id `overlay_id`, if any.
+/// writes its figures four times a second into the element with id `overlay_id`, if any, and
+/// draws the mini-map on the canvas with id `map`, if the page has one.
 ///
 /// # Errors
 /// A one-line message (shown by the page) when the server cannot be reached, the manifest does
@@ -200,6 +201,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         nav: navigator(eye, dir),
         touring: None,
         too_big: Default::default(),
+        drawn: Vec::new(),
         stats: Stats {
             cache_budget: cache_bytes,
             backend: backend_name,
@@ -221,7 +223,14 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
     };
     listen(&window, &canvas, &handle.input)?;
     let overlay = document.get_element_by_id(&overlay_id);
-    run_frames(handle.viewer.clone(), handle.input.clone(), canvas, overlay);
+    let map = crate::minimap::MiniMap::find(&document, "map");
+    run_frames(
+        handle.viewer.clone(),
+        handle.input.clone(),
+        canvas,
+        overlay,
+        map,
+    );
     Ok(Handle {
         viewer: handle.viewer,
         input: handle.input,
@@ -302,6 +311,7 @@ fn run_frames(
     input: Rc<RefCell<Input>>,
     canvas: HtmlCanvasElement,
     overlay: Option<web_sys::Element>,
+    map: Option<crate::minimap::MiniMap>,
 ) {
     type Tick = Closure<dyn FnMut(f64)>;
     let tick: Rc<RefCell<Option<Tick>>> = Rc::new(RefCell::new(None));
@@ -325,6 +335,9 @@ fn run_frames(
                 last_overlay = now;
                 if let Some(o) = &overlay {
                     o.set_text_content(Some(&overlay_text(&v.stats)));
+                }
+                if let Some(m) = &map {
+                    m.draw(&v);
                 }
                 share_viewpoint(&v.stats);
             }

@@ -112,6 +112,8 @@ pub struct Viewer {
     /// Segments larger than the whole cache: reported as held so no answer lists them again.
     pub too_big: std::collections::HashSet<u32>,
     pub stats: Stats,
+    /// The instances drawn in the last frame (for the mini-map).
+    pub drawn: Vec<u32>,
     /// Recent frame intervals (ms), for the mean.
     pub recent: std::collections::VecDeque<f64>,
     pub last_t: Option<f64>,
@@ -263,8 +265,10 @@ impl Viewer {
         }
         let header = &self.model.header;
         let mut draws = Vec::with_capacity(d.drawn.len());
+        self.drawn.clear();
         for o in &d.drawn {
             if let Some(Resident::Mesh(mesh)) = self.cache.get(o.segment) {
+                self.drawn.push(o.instance);
                 let inst = &header.instances[o.instance as usize];
                 let color = header
                     .materials

@@ -29,11 +29,16 @@ impl<'a> Session<'a> {
     /// Loads the manifest and cell graph, starts the renderer (calibrating the cost model)
     /// and the IO stage. `cfg.path` is only used by [`Session::path_observer`].
     pub fn open(cfg: &'a WalkConfig) -> Result<Session<'a>> {
+        let renderer = Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
+        Self::open_on(cfg, renderer)
+    }
+
+    /// [`Session::open`] drawing with `renderer` (one made on a window's adapter, so that its
+    /// frames can go into the window's surface: [`Session::frame_into`]).
+    pub fn open_on(cfg: &'a WalkConfig, mut renderer: Renderer) -> Result<Session<'a>> {
         let start = Instant::now();
         let remote = Remote::new(&cfg.server, cfg.token.clone())?;
         let model = load_model(&remote)?;
-        let mut renderer =
-            Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
         let cost = portico_render::calibrate(&mut renderer)?;
         let (cache_bytes, window) = portico_client::cache::split_budget(cfg.cache_bytes);
         let policy = Policy {
@@ -80,6 +85,31 @@ impl<'a> Session<'a> {
     /// the time of the frame's row), then tells the IO stage where the observer is. Never waits
     /// for the network.
     pub fn frame(&mut self, t: f64, obs: &Observer) -> Result<&FrameRow> {
+        self.draw(t, obs, None)
+    }
+
+    /// [`Session::frame`] drawn into `target` (a surface texture of the renderer's size and
+    /// [`portico_render::COLOR_FORMAT`]) instead of the offscreen targets: no read-back.
+    pub fn frame_into(
+        &mut self,
+        t: f64,
+        obs: &Observer,
+        target: &portico_render::wgpu::TextureView,
+    ) -> Result<&FrameRow> {
+        self.draw(t, obs, Some(target))
+    }
+
+    /// The renderer (its device and queue present a window's surface).
+    pub fn renderer(&self) -> &Renderer {
+        &self.renderer
+    }
+
+    fn draw(
+        &mut self,
+        t: f64,
+        obs: &Observer,
+        target: Option<&portico_render::wgpu::TextureView>,
+    ) -> Result<&FrameRow> {
         let t0 = Instant::now();
         let frame = self.rows.len() as u64;
         let io = self.io.as_mut().context("the session is closed")?;
@@ -89,7 +119,8 @@ impl<'a> Session<'a> {
             ..FrameRow::default()
         };
         self.walker.take_arrivals(io, &mut row);
-        self.walker.frame(&mut self.renderer, obs, &mut row)?;
+        self.walker
+            .frame(&mut self.renderer, obs, &mut row, target)?;
         row.frame_s = (t0.elapsed().as_secs_f64() - self.walker.picture_s).max(0.0);
         self.walker.last_frame_s = Some(row.frame_s);
         self.walker.online.observe(row.predicted_s, row.render_s);

@@ -142,12 +142,14 @@ impl<'a> Walker<'a> {
         )
     }
 
-    /// The frame decision ([`portico_client::frame`]), then its draws on the GPU.
+    /// The frame decision ([`portico_client::frame`]), then its draws on the GPU: into the
+    /// renderer's offscreen targets, or into `target` (a window's surface texture).
     pub(super) fn frame(
         &mut self,
         r: &mut Renderer,
         obs: &Observer,
         row: &mut FrameRow,
+        target: Option<&portico_render::wgpu::TextureView>,
     ) -> Result<()> {
         let view = Viewpoint::of(
             obs,
@@ -200,7 +202,10 @@ impl<'a> Walker<'a> {
             Some(h) => stand_ins(cache, &self.colour_boxes, h, &d.boxes, &mut draws),
             None => Vec::new(),
         };
-        let timing = r.render_with_boxes(&view.camera, &draws, &textured)?;
+        let timing = match target {
+            Some(t) => r.render_into(view.camera.view_proj(r.aspect()), &draws, &textured, t)?,
+            None => r.render_with_boxes(&view.camera, &draws, &textured)?,
+        };
         row.render_s = timing.total_s;
         row.drawn_objects = timing.draws;
         row.drawn_triangles = timing.triangles;
