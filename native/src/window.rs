@@ -149,7 +149,13 @@ impl App<'_> {
             .with_inner_size(PhysicalSize::new(w, h))
             .with_resizable(false);
         let window = Arc::new(el.create_window(attrs).context("creating the window")?);
-        let (session, show) = match surface_renderer(&window, (w, h)) {
+        // `PORTICO_WINDOW_READBACK=1` asks for the read-back (to compare, or to work around a
+        // driver whose surfaces misbehave).
+        let presented = match std::env::var_os("PORTICO_WINDOW_READBACK") {
+            Some(_) => Err(anyhow::anyhow!("PORTICO_WINDOW_READBACK is set")),
+            None => surface_renderer(&window, (w, h)),
+        };
+        let (session, show) = match presented {
             Ok((renderer, surface, config)) => (
                 Session::open_on(self.cfg, renderer)?,
                 Show::Surface { surface, config },
