@@ -44,12 +44,15 @@ def free_port():
 
 
 def parse_link(spec):
-    """'50ms,10mbit' -> (latency ms, bytes per second)."""
-    latency, rate = spec.split(",")
-    ms = float(latency.removesuffix("ms"))
-    units = {"kbit": 1e3, "mbit": 1e6, "gbit": 1e9}
-    unit = next(u for u in units if rate.endswith(u))
-    return ms, float(rate.removesuffix(unit)) * units[unit] / 8
+    """'50ms,10mbit' or loadtest's 'rtt=50ms,rate=10mbit' -> (latency ms, bytes per second)."""
+    try:
+        latency, rate = (p.split("=")[-1].strip().lower() for p in spec.split(","))
+        ms = float(latency.removesuffix("ms"))
+        units = {"kbit": 1e3, "mbit": 1e6, "gbit": 1e9}
+        unit = next(u for u in units if rate.endswith(u))
+        return ms, float(rate.removesuffix(unit)) * units[unit] / 8
+    except (ValueError, StopIteration):
+        sys.exit(f"--link {spec!r}: expected LATENCYms,RATE(k|m|g)bit, e.g. 50ms,10mbit")
 
 
 def main():
@@ -118,6 +121,7 @@ def main():
         while time.time() - t1 < a.seconds:
             time.sleep(0.5)
             samples.append(json.loads(run("return window.portico.stats()")))
+        elapsed = time.time() - t1
         last = samples[-1] if samples else first
         out = {
             "server": a.server,
@@ -129,7 +133,7 @@ def main():
             "bytes_at_first_complete": first.get("bytes_received"),
             "tour_seconds": a.seconds,
             "tour_frames": last.get("frames", 0) - frames0,
-            "mean_frame_ms": (a.seconds * 1e3 / max(1, last.get("frames", 0) - frames0)),
+            "mean_frame_ms": (elapsed * 1e3 / max(1, last.get("frames", 0) - frames0)),
             "objects_skipped_mean": sum(x["objects_skipped"] for x in samples) / max(1, len(samples)),
             "visible_objects_mean": sum(x["visible_objects"] for x in samples) / max(1, len(samples)),
             "resident_mb": last.get("resident_bytes", 0) / 2**20,
@@ -151,4 +155,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except (RuntimeError, OSError) as e:
+        sys.exit(f"bench/browser.py: {e}")

@@ -7,7 +7,6 @@
 
 use crate::drive::{Ask, Event, Fetcher, Items, drive};
 use crate::net::Remote;
-use anyhow::bail;
 use portico_data::cells::StabList;
 use portico_data::geometry::Aabb;
 use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse, SegmentInfo};
@@ -146,10 +145,7 @@ impl Http {
 /// Checks a segment's bytes against its row of the manifest (size and xxh3, the strong ETag):
 /// a segment damaged on the way is rejected, never uploaded or decoded.
 pub fn verify(info: Option<&SegmentInfo>, id: u32, bytes: &[u8]) -> anyhow::Result<()> {
-    let Some(info) = info else {
-        bail!("segment {id}: not in the manifest");
-    };
-    info.check(id, bytes).map_err(anyhow::Error::msg)
+    portico_protocol::verify_segment(info, id, bytes).map_err(anyhow::Error::msg)
 }
 
 /// A running IO stage.

@@ -39,6 +39,15 @@ pub struct SegmentInfo {
     pub checksum: u64,
 }
 
+/// Checks segment `id`'s bytes against its manifest row, if it has one ([`SegmentInfo::check`]).
+///
+/// # Errors
+/// One line naming the segment: not in the manifest, or corrupt.
+pub fn verify_segment(info: Option<&SegmentInfo>, id: u32, bytes: &[u8]) -> Result<(), String> {
+    info.ok_or_else(|| format!("segment {id}: not in the manifest"))?
+        .check(id, bytes)
+}
+
 impl SegmentInfo {
     /// Checks a segment's bytes against this row (length and xxh3, the strong ETag), so a
     /// segment damaged on the way is rejected before anything decodes or uploads it.

@@ -24,6 +24,7 @@ mod held;
 pub mod impostor;
 mod mesh;
 mod pipeline;
+mod readback;
 mod renderer;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod sheet;

@@ -483,7 +483,7 @@ pub async fn prefetch(
 /// Any other path.
 pub async fn fallback() -> Error {
     Error::not_found(
-        "no such endpoint; see /v1/manifest, /v1/cells, /v1/db/{database_id}/segments/{id}, /v1/db/{database_id}/batch, /v1/prefetch, /v1/stream",
+        "no such endpoint; see / (the browser viewer), /healthz, /metrics, /v1/manifest, /v1/cells, /v1/db/{database_id}/segments/{id}, /v1/db/{database_id}/batch, /v1/db/{database_id}/prefetch, /v1/segments/{id}, /v1/batch, /v1/prefetch, /v1/stream",
     )
 }
 

@@ -45,8 +45,8 @@ pub struct Args {
     /// direction bucket (the baseline the shared answers are measured against; exact, costly).
     #[arg(long)]
     exact_answers: bool,
-    /// The built browser viewer to serve at `/` (default: `target/viewer` beside the binary's
-    /// folder or under the current folder, where `web/build.sh` puts it).
+    /// The built browser viewer to serve at `/` (default: `target/viewer` under the current
+    /// folder, where `web/build.sh` puts it, else beside the binary's folder).
     #[arg(long, value_name = "DIR")]
     viewer: Option<PathBuf>,
     /// Memory for the stream sessions' shared need lists, MB.
@@ -59,12 +59,13 @@ pub struct Args {
 }
 
 /// The viewer folder: the one given (which must hold a built viewer), else `target/viewer`
-/// next to the binary's folder (`target/release/portico`) or under the current folder.
+/// under the current folder (a checkout), else next to the binary's folder
+/// (`target/release/portico` → `target/viewer`).
 fn viewer_dir(given: Option<PathBuf>) -> Result<Option<PathBuf>> {
     if let Some(d) = given {
         if !portico_server::viewer::is_built(&d) {
             anyhow::bail!(
-                "--viewer {}: no built viewer there (index.html, {}); run `bash web/build.sh`",
+                "--viewer {0}: no built viewer there (index.html, {1}); build one with `bash web/build.sh {0}`",
                 d.display(),
                 portico_server::viewer::FILES.join(", ")
             );
@@ -74,9 +75,8 @@ fn viewer_dir(given: Option<PathBuf>) -> Result<Option<PathBuf>> {
     let beside = std::env::current_exe()
         .ok()
         .and_then(|e| Some(e.parent()?.parent()?.join("viewer")));
-    Ok(beside
-        .into_iter()
-        .chain([PathBuf::from("target/viewer")])
+    Ok(std::iter::once(PathBuf::from("target/viewer"))
+        .chain(beside)
         .find(|d| portico_server::viewer::is_built(d)))
 }
 

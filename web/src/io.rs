@@ -27,6 +27,12 @@ pub const PARALLEL: usize = 8;
 pub const OPEN_WAIT: Duration = Duration::from_secs(2);
 /// How long after a stream failed another is tried.
 pub const RETRY: Duration = Duration::from_secs(5);
+/// How long pull waits after a failed prefetch request before it asks again (a server that is
+/// down is not asked sixty times a second).
+pub const BACKOFF: Duration = Duration::from_millis(500);
+/// Most pushed bytes taken into the cache in one frame: the rest waits for the next frames, so
+/// a burst of pushes never makes one long frame.
+pub const PUSHED_PER_FRAME: u64 = 4 << 20;
 
 /// What a finished request left in the inbox.
 enum Done {
@@ -77,6 +83,10 @@ pub struct Io {
     retry_at: Option<Instant>,
     /// Stream sessions opened so far.
     pub sessions: u64,
+    /// No prefetch request before this (after a failure).
+    ask_after: Option<Instant>,
+    /// Whether the stream carried the segments at the last frame.
+    was_pushing: bool,
 }
 
 impl Io {
@@ -95,6 +105,8 @@ impl Io {
             stream: None,
             retry_at: None,
             sessions: 0,
+            ask_after: None,
+            was_pushing: false,
             remote,
             catalogue: Rc::new(catalogue),
             policy,
@@ -124,7 +136,10 @@ impl Io {
                                 .refresh(resp.items.iter().map(|i| i.segment).collect(), at);
                             out.push(Arrival::Release(resp.evict));
                         }
-                        Err(e) => out.push(self.failure(e)),
+                        Err(e) => {
+                            self.ask_after = Some(now + BACKOFF);
+                            out.push(self.failure(e));
+                        }
                     }
                 }
                 Done::Batch(ids, got) => {
@@ -143,8 +158,13 @@ impl Io {
                     for (id, item) in items {
                         answered.insert(id);
                         let checked = item.and_then(|b| {
-                            crate::verify(self.catalogue.segments.get(id as usize), id, &b)
-                                .map(|()| b)
+                            portico_protocol::verify_segment(
+                                self.catalogue.segments.get(id as usize),
+                                id,
+                                &b,
+                            )
+                            .map(|()| b)
+                            .map_err(anyhow::Error::msg)
                         });
                         match checked {
                             Ok(bytes) => {
@@ -177,12 +197,13 @@ impl Io {
             return;
         };
         let now = Instant::now();
-        for p in stream.take() {
+        for p in stream.take(PUSHED_PER_FRAME) {
             match p {
                 Pushed::Segment(id, bytes) => {
-                    match crate::verify(self.catalogue.segments.get(id as usize), id, &bytes) {
+                    let info = self.catalogue.segments.get(id as usize);
+                    match portico_protocol::verify_segment(info, id, &bytes) {
                         Ok(()) => out.push(Arrival::Segment(id, bytes, now)),
-                        Err(e) => out.push(Arrival::Failed(format!("{e:#}"))),
+                        Err(e) => out.push(Arrival::Failed(e)),
                     }
                 }
                 Pushed::Error(e) => out.push(Arrival::Failed(e)),
@@ -218,7 +239,7 @@ impl Io {
         }
         let now = Instant::now();
         if self.stream.is_none() && self.retry_at.is_none_or(|t| now >= t) {
-            match Stream::open(self.remote.base(), self.policy) {
+            match Stream::open(self.remote.base(), self.remote.token(), self.policy) {
                 Ok(s) => {
                     self.stream = Some((s, now));
                     self.sessions += 1;
@@ -226,14 +247,26 @@ impl Io {
                 Err(_) => self.retry_at = Some(now + RETRY),
             }
         }
-        match &self.stream {
+        let pushing = match &self.stream {
             Some((s, _)) if s.is_open() => {
                 s.observe(observer);
                 true
             }
-            Some((_, since)) => now.duration_since(*since) < OPEN_WAIT,
+            Some((_, since)) if now.duration_since(*since) < OPEN_WAIT => true,
+            // Not open in time: pull, and try another session later.
+            Some(_) => {
+                self.stream = None;
+                self.retry_at = Some(now + RETRY);
+                false
+            }
             None => false,
+        };
+        if pushing && !self.was_pushing {
+            // The stream takes over: what pull still meant to read is the stream's now.
+            self.schedule.refresh(Vec::new(), now);
         }
+        self.was_pushing = pushing;
+        pushing
     }
 
     fn failure(&mut self, e: anyhow::Error) -> Arrival {
@@ -251,8 +284,9 @@ impl Io {
         if self.stopped || self.pushing(observer) {
             return;
         }
-        if !self.asking {
+        if !self.asking && self.ask_after.is_none_or(|t| Instant::now() >= t) {
             self.asking = true;
+            self.ask_after = None;
             let held: HashSet<u32> = held.chain(self.schedule.pending()).collect();
             let number = self.schedule.asked();
             let req = PrefetchRequest {

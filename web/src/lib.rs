@@ -8,7 +8,9 @@
 //! §5.2, and segment batches) when the stream is unavailable. `portico serve` serves the page
 //! at `/`; `web/build.sh` builds it.
 //!
-//! Query parameters of the page: `server` (another origin's server; default the page's own),
+//! Query parameters of the page: `server` (another origin's server, which must then allow the
+//! page's origin by CORS — Portico's own server does not; default the page's own), `token`
+//! (the server's `--token`),
 //! `cache_mb` (the byte budget, default 64), `budget_ms` (the frame budget, default 50),
 //! `backend` (`webgl`, `webgpu` or `auto`, the default), `transport` (`stream`, the default, or
 //! `pull`). The fragment holds the viewpoint
@@ -32,14 +34,3 @@ mod viewer;
 
 #[cfg(target_arch = "wasm32")]
 pub use page::{Handle, start};
-
-/// Checks a segment against its manifest row (size and xxh3).
-#[cfg(target_arch = "wasm32")]
-pub(crate) fn verify(
-    info: Option<&portico_protocol::SegmentInfo>,
-    id: u32,
-    bytes: &[u8],
-) -> anyhow::Result<()> {
-    let info = info.ok_or_else(|| anyhow::anyhow!("segment {id}: not in the manifest"))?;
-    info.check(id, bytes).map_err(anyhow::Error::msg)
-}

@@ -13,6 +13,9 @@ use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_futures::JsFuture;
 use web_sys::{Request, RequestInit, Response};
 
+/// Longest a request may take before it is given up (and counted as failed).
+const TIMEOUT_MS: u32 = 30_000;
+
 /// The server no longer serves the database the page reads: walking on needs a reload.
 #[derive(Debug)]
 pub struct Stale(pub String);
@@ -29,6 +32,8 @@ impl std::error::Error for Stale {}
 #[derive(Debug)]
 pub struct Remote {
     base: String,
+    /// `Authorization: Bearer` for a server started with `--token`.
+    token: Option<String>,
     /// `/v1/db/{id}` once the manifest named the database (content-named segment URLs).
     database: RefCell<Option<String>>,
 }
@@ -42,10 +47,11 @@ pub fn js_error(e: &JsValue) -> String {
 }
 
 impl Remote {
-    /// The server at `base` (`""`: the page's own origin).
-    pub fn new(base: &str) -> Remote {
+    /// The server at `base` (`""`: the page's own origin), with its token if it has one.
+    pub fn new(base: &str, token: Option<String>) -> Remote {
         Remote {
             base: base.trim_end_matches('/').to_string(),
+            token,
             database: RefCell::new(None),
         }
     }
@@ -53,6 +59,11 @@ impl Remote {
     /// The server's base URL (`""`: the page's origin).
     pub fn base(&self) -> &str {
         &self.base
+    }
+
+    /// The server's token, if it has one.
+    pub fn token(&self) -> Option<&str> {
+        self.token.as_deref()
     }
 
     fn segments_base(&self) -> String {
@@ -64,6 +75,8 @@ impl Remote {
 
     async fn send(&self, url: &str, body: Option<&[u8]>, what: &str) -> Result<Vec<u8>> {
         let init = RequestInit::new();
+        // A request the network never answers must not hold its slot forever.
+        init.set_signal(Some(&web_sys::AbortSignal::timeout_with_u32(TIMEOUT_MS)));
         if let Some(b) = body {
             init.set_method("POST");
             let array = Uint8Array::from(b);
@@ -73,13 +86,21 @@ impl Remote {
             .map_err(|e| anyhow!("{url}: {}", js_error(&e)))?;
         let headers = req.headers();
         let _ = headers.set("accept", BINCODE_MIME);
+        if let Some(t) = &self.token {
+            let _ = headers.set("authorization", &format!("Bearer {t}"));
+        }
         if body.is_some() {
             let _ = headers.set("content-type", BINCODE_MIME);
         }
         let window = web_sys::window().ok_or_else(|| anyhow!("no window"))?;
         let resp: Response = JsFuture::from(window.fetch_with_request(&req))
             .await
-            .map_err(|e| anyhow!("{url}: {what}: {}", js_error(&e)))?
+            .map_err(|e| {
+                anyhow!(
+                    "{url}: no answer ({}): is the server running?",
+                    js_error(&e)
+                )
+            })?
             .dyn_into()
             .map_err(|_| anyhow!("{url}: {what}: not a response"))?;
         let buffer = resp

@@ -5,11 +5,10 @@
 use crate::input::Input;
 use crate::io::{Catalogue, Io};
 use crate::net::{Remote, js_error};
-use crate::viewer::{Model, SPEED, Stats, TURN, Viewer};
+use crate::viewer::{Model, SPEED, Stats, TURN, Viewer, navigator};
 use glam::Vec3;
 use portico_client::cache::{ObjectCache, split_budget};
 use portico_client::frame::Decider;
-use portico_client::navigate::Navigator;
 use portico_data::path::PathKind;
 use portico_protocol::Policy;
 use std::cell::RefCell;
@@ -34,6 +33,10 @@ impl Handle {
 
     /// Puts the eye at (x, y, z) looking along (dx, dy, dz) and stops the tour.
     pub fn look(&self, x: f32, y: f32, z: f32, dx: f32, dy: f32, dz: f32) {
+        if ![x, y, z, dx, dy, dz].iter().all(|c| c.is_finite()) {
+            web_sys::console::warn_1(&"portico: look() needs finite numbers".into());
+            return;
+        }
         let mut v = self.viewer.borrow_mut();
         v.touring = None;
         v.nav = navigator(Vec3::new(x, y, z), Vec3::new(dx, dy, dz));
@@ -46,12 +49,6 @@ impl Handle {
         v.touring = (on && v.model.tour.is_some()).then_some(now);
         self.input.borrow_mut().touched = false;
     }
-}
-
-fn navigator(eye: Vec3, dir: Vec3) -> Navigator {
-    let mut nav = Navigator::new(eye, dir, SPEED, TURN);
-    nav.pitch = dir.normalize_or(Vec3::X).y.clamp(-1.0, 1.0).asin();
-    nav
 }
 
 /// Reads `name` from the page's query string.
@@ -97,14 +94,20 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         .dyn_into()
         .map_err(|_| format!("#{canvas_id} is not a canvas"))?;
     let server = param("server").unwrap_or_default();
-    let cache_mb: u64 = param("cache_mb").and_then(|s| s.parse().ok()).unwrap_or(64);
-    let budget_ms: f64 = param("budget_ms")
+    let token = param("token").filter(|t| !t.is_empty());
+    let cache_mb: u64 = param("cache_mb")
         .and_then(|s| s.parse().ok())
-        .unwrap_or(50.0);
+        .unwrap_or(64)
+        .clamp(1, 1 << 16);
+    let budget_ms: f64 = param("budget_ms")
+        .and_then(|s| s.parse::<f64>().ok())
+        .filter(|b| b.is_finite())
+        .unwrap_or(50.0)
+        .clamp(5.0, 1000.0);
     let backend = param("backend").unwrap_or_else(|| "auto".into());
     let push = param("transport").as_deref() != Some("pull");
 
-    let remote = Rc::new(Remote::new(&server));
+    let remote = Rc::new(Remote::new(&server, token));
     let (manifest, graph) = remote
         .model()
         .await
@@ -135,8 +138,8 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         decoded: header.decoded_sizes().collect(),
     };
 
-    let ratio = window.device_pixel_ratio().max(1.0);
-    let (width, height) = canvas_size(&canvas, ratio);
+    // WebGL2 guarantees 2048-pixel textures; the device's own limit applies from then on.
+    let (width, height) = canvas_size(&canvas, 2048);
     let backends = match backend.as_str() {
         "webgl" => wgpu::Backends::GL,
         "webgpu" => wgpu::Backends::BROWSER_WEBGPU,
@@ -147,7 +150,12 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
     let instance = wgpu::util::new_instance_with_webgpu_detection(desc).await;
     let surface = instance
         .create_surface(wgpu::SurfaceTarget::Canvas(canvas.clone()))
-        .map_err(|e| format!("cannot draw on the canvas: {e}"))?;
+        .map_err(|e| {
+            format!(
+                "cannot draw on the canvas ({backend} asked): {e}; without ?backend= the viewer \
+                 uses WebGPU where the browser has an adapter and WebGL2 otherwise"
+            )
+        })?;
     let adapter = instance
         .request_adapter(&wgpu::RequestAdapterOptions {
             compatible_surface: Some(&surface),
@@ -159,21 +167,29 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
     let renderer = portico_render::Renderer::on_adapter(instance, &adapter, width, height, Some(1))
         .await
         .map_err(|e| format!("starting the renderer: {e}"))?;
-    let caps = surface.get_capabilities(&adapter);
+    // wgpu's default handler panics on a GPU error; a page logs it and goes on.
+    renderer
+        .device()
+        .on_uncaptured_error(std::sync::Arc::new(|e: wgpu::Error| {
+            web_sys::console::error_1(&format!("portico: GPU error: {e}").into());
+        }));
+    let formats = surface.get_capabilities(&adapter).formats;
     let want = portico_render::COLOR_FORMAT;
-    let format = if caps.formats.contains(&want) {
-        want
+    // The frames' format, or its linear twin viewed as sRGB (WebGPU canvases offer
+    // `bgra8unorm` or `rgba8unorm`, never an sRGB format).
+    let (format, view_formats) = if formats.contains(&want) {
+        (want, vec![])
+    } else if formats.contains(&want.remove_srgb_suffix()) {
+        (want.remove_srgb_suffix(), vec![want])
     } else {
-        caps.formats
-            .first()
-            .copied()
-            .ok_or("the canvas offers no surface format")?
+        let plain = want.remove_srgb_suffix();
+        return Err(format!("the canvas offers none of {want:?}, {plain:?}").into());
     };
     let mut config = surface
         .get_default_config(&adapter, width, height)
         .ok_or("the canvas offers no surface format")?;
     config.format = format;
-    config.view_formats = if format == want { vec![] } else { vec![want] };
+    config.view_formats = view_formats;
     config.present_mode = wgpu::PresentMode::AutoVsync;
     surface.configure(renderer.device(), &config);
 
@@ -204,6 +220,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         drawn: Vec::new(),
         stats: Stats {
             cache_budget: cache_bytes,
+            budget_bytes: cache_mb << 20,
             backend: backend_name,
             ..Stats::default()
         },
@@ -222,6 +239,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         input: Rc::new(RefCell::new(Input::default())),
     };
     listen(&window, &canvas, &handle.input)?;
+    follow_address(&window, &handle.viewer)?;
     let overlay = document.get_element_by_id(&overlay_id);
     let map = crate::minimap::MiniMap::find(&document, "map");
     run_frames(
@@ -237,12 +255,16 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
     })
 }
 
-/// The canvas's drawing-buffer size for its CSS size at `ratio` device pixels per CSS pixel.
-fn canvas_size(canvas: &HtmlCanvasElement, ratio: f64) -> (u32, u32) {
-    let w = ((canvas.client_width().max(16) as f64) * ratio).round() as u32;
-    let h = ((canvas.client_height().max(16) as f64) * ratio).round() as u32;
-    canvas.set_width(w);
-    canvas.set_height(h);
+/// The canvas's drawing-buffer size for its CSS size at the device's pixel ratio, at most
+/// `max` pixels a side (the GPU's texture limit); sets it on the canvas when it changed.
+fn canvas_size(canvas: &HtmlCanvasElement, max: u32) -> (u32, u32) {
+    let ratio = web_sys::window().map_or(1.0, |w| w.device_pixel_ratio().max(1.0));
+    let side = |css: i32| ((f64::from(css.max(16)) * ratio).round() as u32).min(max);
+    let (w, h) = (side(canvas.client_width()), side(canvas.client_height()));
+    if (w, h) != (canvas.width(), canvas.height()) {
+        canvas.set_width(w);
+        canvas.set_height(h);
+    }
     (w, h)
 }
 
@@ -262,6 +284,10 @@ fn listen(
 ) -> Result<(), JsValue> {
     let i = input.clone();
     let down = Closure::<dyn FnMut(KeyboardEvent)>::new(move |e: KeyboardEvent| {
+        // Ctrl+R, Ctrl+F, Alt+…, ⌘… are the browser's.
+        if e.ctrl_key() || e.meta_key() || e.alt_key() {
+            return;
+        }
         if i.borrow_mut().key_down(&e.code()) {
             e.prevent_default();
         }
@@ -274,6 +300,15 @@ fn listen(
     });
     window.add_event_listener_with_callback("keyup", up.as_ref().unchecked_ref())?;
     up.forget();
+    // A key released while the page had no focus never sends keyup: let go of everything.
+    let i = input.clone();
+    let blur = Closure::<dyn FnMut(web_sys::Event)>::new(move |_e: web_sys::Event| {
+        let mut i = i.borrow_mut();
+        i.keys.clear();
+        i.pointer_up();
+    });
+    window.add_event_listener_with_callback("blur", blur.as_ref().unchecked_ref())?;
+    blur.forget();
 
     let (i, c) = (input.clone(), canvas.clone());
     let pdown = Closure::<dyn FnMut(PointerEvent)>::new(move |e: PointerEvent| {
@@ -304,6 +339,22 @@ fn listen(
     Ok(())
 }
 
+/// A viewpoint pasted into the address of an open page (`hashchange`: the page's own
+/// `replaceState` does not fire it) moves the observer there.
+fn follow_address(window: &web_sys::Window, viewer: &Rc<RefCell<Viewer>>) -> Result<(), JsValue> {
+    let v = viewer.clone();
+    let moved = Closure::<dyn FnMut(web_sys::Event)>::new(move |_e: web_sys::Event| {
+        if let Some((eye, dir)) = viewpoint_from_hash() {
+            let mut v = v.borrow_mut();
+            v.touring = None;
+            v.nav = navigator(eye, dir);
+        }
+    });
+    window.add_event_listener_with_callback("hashchange", moved.as_ref().unchecked_ref())?;
+    moved.forget();
+    Ok(())
+}
+
 /// Runs one frame per animation frame, forever; refreshes the overlay and the address's
 /// viewpoint a few times a second.
 fn run_frames(
@@ -320,16 +371,9 @@ fn run_frames(
     *tick.borrow_mut() = Some(Closure::new(move |now: f64| {
         {
             let mut v = viewer.borrow_mut();
-            let ratio = web_sys::window().map_or(1.0, |w| w.device_pixel_ratio().max(1.0));
-            let (w, h) = (
-                ((canvas.client_width().max(16) as f64) * ratio).round() as u32,
-                ((canvas.client_height().max(16) as f64) * ratio).round() as u32,
-            );
-            if (w, h) != (v.config.width, v.config.height) {
-                canvas.set_width(w);
-                canvas.set_height(h);
-                v.resize(w, h);
-            }
+            let max = v.renderer.device().limits().max_texture_dimension_2d;
+            let (w, h) = canvas_size(&canvas, max);
+            v.resize(w, h);
             v.frame(now, &mut input.borrow_mut());
             if now - last_overlay > 250.0 {
                 last_overlay = now;
@@ -357,12 +401,13 @@ fn run_frames(
 fn overlay_text(s: &Stats) -> String {
     let mb = |b: u64| b as f64 / 1_048_576.0;
     let mut t = format!(
-        "{:.1} ms/frame ({}, {})\nresident {:.1} of {:.0} MB\nvisible {} objects, {} skipped, {} LODs coarser\n{} triangles\nreceived {} segments, {:.2} MB",
+        "{:.1} ms/frame ({}, {})\nresident {:.1} of {:.0} MB (budget {:.0} MB with the IO stage)\nvisible {} objects, {} skipped, {} LODs coarser\n{} triangles\nreceived {} segments, {:.2} MB",
         s.mean_frame_ms,
         s.backend,
         s.transport,
         mb(s.resident_bytes),
         mb(s.cache_budget),
+        mb(s.budget_bytes),
         s.visible_objects,
         s.objects_skipped,
         s.lods_skipped,

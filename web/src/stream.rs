@@ -58,10 +58,20 @@ fn url(base: &str) -> Result<String, String> {
 
 impl Stream {
     /// Opens a session with the server at `base`; `Hello` goes as soon as it opens.
-    pub fn open(base: &str, policy: Policy) -> Result<Stream, String> {
+    /// `token`: the server's `--token`, given as `?token=` (a browser cannot set headers on a
+    /// WebSocket).
+    pub fn open(base: &str, token: Option<&str>, policy: Policy) -> Result<Stream, String> {
+        // Messages name `url`; only the socket gets the token.
         let url = url(base)?;
-        let ws =
-            WebSocket::new(&url).map_err(|e| format!("{url}: {}", crate::net::js_error(&e)))?;
+        let with_token = match token {
+            Some(t) => format!(
+                "{url}?token={}",
+                String::from(js_sys::encode_uri_component(t))
+            ),
+            None => url.clone(),
+        };
+        let ws = WebSocket::new(&with_token)
+            .map_err(|e| format!("{url}: {}", crate::net::js_error(&e)))?;
         ws.set_binary_type(BinaryType::Arraybuffer);
         let inbox = Rc::new(RefCell::new(VecDeque::new()));
         let open = Rc::new(Cell::new(false));
@@ -134,9 +144,24 @@ impl Stream {
         self.closed.borrow().clone()
     }
 
-    /// What arrived since the last call.
-    pub fn take(&self) -> Vec<Pushed> {
-        self.inbox.borrow_mut().drain(..).collect()
+    /// What arrived since the last call, oldest first, up to about `budget` bytes (at least
+    /// one message); the rest stays for the next call.
+    pub fn take(&self, budget: u64) -> Vec<Pushed> {
+        let mut inbox = self.inbox.borrow_mut();
+        let mut out = Vec::new();
+        let mut taken = 0u64;
+        while let Some(p) = inbox.front() {
+            let bytes = match p {
+                Pushed::Segment(_, b) => b.len() as u64,
+                Pushed::Error(_) => 0,
+            };
+            if !out.is_empty() && taken + bytes > budget {
+                break;
+            }
+            taken += bytes;
+            out.extend(inbox.pop_front());
+        }
+        out
     }
 
     fn send(&self, msg: &StreamClient) {

@@ -51,14 +51,23 @@ pub struct Stats {
     pub frames: u64,
     /// The last frame's interval, milliseconds (what the person sees).
     pub frame_ms: f64,
-    /// Mean frame interval over the last second, milliseconds.
+    /// Mean frame interval over the last 60 frames, milliseconds.
     pub mean_frame_ms: f64,
     /// Bytes resident in the cache, and its budget.
     pub resident_bytes: u64,
-    /// The cache's byte budget.
+    /// The cache's byte budget: seven eighths of [`Stats::budget_bytes`].
     pub cache_budget: u64,
+    /// The whole byte budget asked for (`?cache_mb=`, 64 MiB by default): the cache and, for
+    /// the IO stage's reads in flight, an eighth.
+    pub budget_bytes: u64,
     /// Most bytes the cache ever held.
     pub cache_peak_bytes: u64,
+    /// Most GPU memory the renderer's meshes held at the end of a frame, wherever they were
+    /// kept (the cache or anywhere else): what the budget must bound.
+    pub gpu_held_peak_bytes: u64,
+    /// Segments that arrived intact but could not be used (a compressed segment, a mesh over
+    /// the device's limits): reported as held so that they are not sent again.
+    pub unusable_segments: u64,
     /// Segments and bytes received (wire).
     pub segments_received: u64,
     /// See [`Stats::segments_received`].
@@ -109,7 +118,8 @@ pub struct Viewer {
     pub nav: Navigator,
     /// The tour and the time (s) it started, while it drives the view.
     pub touring: Option<f64>,
-    /// Segments larger than the whole cache: reported as held so no answer lists them again.
+    /// Segments larger than the whole cache, or unusable here: reported as held so that no
+    /// answer lists them again and no stream pushes them again.
     pub too_big: std::collections::HashSet<u32>,
     pub stats: Stats,
     /// The instances drawn in the last frame (for the mini-map).
@@ -148,7 +158,8 @@ impl Viewer {
                             }
                         },
                         Err(e) => {
-                            self.io.evicted(vec![id]);
+                            self.too_big.insert(id);
+                            self.stats.unusable_segments += 1;
                             self.fail(e);
                         }
                     }
@@ -210,8 +221,7 @@ impl Viewer {
                 let s = ((t - start) as f32) % tour.duration().max(1e-3);
                 let (eye, dir) = tour.sample(s);
                 let (next, _) = tour.sample(s + 0.05);
-                self.nav = Navigator::new(eye, dir, SPEED, TURN);
-                self.nav.pitch = dir.normalize_or(Vec3::X).y.clamp(-1.0, 1.0).asin();
+                self.nav = navigator(eye, dir);
                 (eye, dir, (next - eye) / 0.05)
             }
             _ => {
@@ -236,6 +246,10 @@ impl Viewer {
         self.stats.dir = dir.to_array();
         self.stats.resident_bytes = self.cache.bytes();
         self.stats.cache_peak_bytes = self.cache.peak_bytes();
+        self.stats.gpu_held_peak_bytes = self
+            .stats
+            .gpu_held_peak_bytes
+            .max(self.renderer.gpu_bytes_held());
     }
 
     fn draw(&mut self, obs: &Observer, size: (u32, u32), now_ms: f64) {
@@ -314,6 +328,13 @@ impl Viewer {
 
 fn tracing_free_warn(msg: &str) {
     web_sys::console::warn_1(&msg.into());
+}
+
+/// The navigator at `eye` looking along `dir`, pitch included, at the viewer's speeds.
+pub fn navigator(eye: Vec3, dir: Vec3) -> Navigator {
+    let mut nav = Navigator::new(eye, dir, SPEED, TURN);
+    nav.pitch = dir.normalize_or(Vec3::X).y.clamp(-1.0, 1.0).asin();
+    nav
 }
 
 /// What the cache holds, as the frame decision asks it.
