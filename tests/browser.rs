@@ -1,6 +1,6 @@
 //! The browser viewer end to end, in headless Chromium (WebGL2 through SwiftShader) driven by
 //! chromedriver: the page `portico serve` serves at `/` loads the tiny building from the same
-//! server, draws it, walks the standard tour by script, keeps its cache under the budget,
+//! server (its geometry compressed), draws it, walks the standard tour by script, keeps its cache under the budget,
 //! logs no errors and stays alive across a server restart.
 //!
 //! Needs `web/build.sh` to have built `target/viewer/`, and Debian's `chromium` and
@@ -9,7 +9,7 @@
 
 mod common;
 
-use common::build_tiny;
+use common::build_tiny_with;
 use fantoccini::{Client, ClientBuilder};
 use portico_server::{AppState, Config};
 use serde_json::{Value, json};
@@ -249,7 +249,12 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
-    let db = build_tiny(dir.path());
+    // Compressed geometry: the page decodes it (meshoptimizer's codecs, in Rust) on its thread.
+    let opts = portico_data::build::BuildOptions {
+        compress: true,
+        ..Default::default()
+    };
+    let db = build_tiny_with(dir.path(), &opts);
     let config = || Config {
         viewer: Some(viewer_dir()),
         ..Config::default()

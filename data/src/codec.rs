@@ -27,11 +27,14 @@
 //! possibly hold before anything is allocated, and the decoded mesh is parsed (every index in
 //! range) before it is returned.
 
+#[cfg(feature = "native")]
+use crate::geometry::GEOMETRY_U32_INDICES;
 use crate::geometry::{
-    GEOMETRY_MAGIC, GEOMETRY_MESHOPT, GEOMETRY_U32_INDICES, GEOMETRY_VERSION, GeometryHeader,
-    GeometryView, Mesh, Vertex, encode_geometry,
+    GEOMETRY_MAGIC, GEOMETRY_MESHOPT, GEOMETRY_VERSION, GeometryHeader, GeometryView, Mesh, Vertex,
+    encode_geometry,
 };
 use bytemuck::{Pod, Zeroable};
+use meshoptimizer_rs::{Limits, Workspace};
 use std::borrow::Cow;
 
 /// One vertex before the vertex codec: quantised position, normal and colour (16 bytes).
@@ -60,6 +63,7 @@ pub const MIN_STEP: f32 = 1.0 / 4096.0;
 pub const MAX_DECODED_COUNT: u32 = 1 << 26;
 
 /// Encodes a mesh as a compressed geometry segment (layout in the module docs).
+#[cfg(feature = "native")]
 pub fn encode(mesh: &Mesh) -> Vec<u8> {
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     for v in &mesh.vertices {
@@ -143,6 +147,31 @@ pub fn to_gpu_layout(bytes: &[u8]) -> Result<Cow<'_, [u8]>, String> {
     }
 }
 
+/// [`to_gpu_layout`] for geometry segment `id`, whose LOD record says it occupies `expected`
+/// bytes decoded ([`crate::geometry::plain_size`]; `None` when the client has no record of it).
+/// A compressed segment's counts must match that record before anything is decoded, which
+/// bounds what decoding allocates by what the manifest promised.
+///
+/// # Errors
+/// One line naming the segment: counts that disagree with the record, or what
+/// [`to_gpu_layout`] refuses.
+pub fn to_gpu_layout_as(
+    id: u32,
+    bytes: &[u8],
+    expected: Option<u64>,
+) -> Result<Cow<'_, [u8]>, String> {
+    if let Some(h) = compressed_header(bytes) {
+        let claims = crate::geometry::plain_size(h.vertex_count, h.index_count / 3);
+        if expected != Some(claims) || h.index_count % 3 != 0 {
+            return Err(format!(
+                "segment {id}: its counts ({} vertices, {} indices) disagree with its LOD record",
+                h.vertex_count, h.index_count
+            ));
+        }
+    }
+    to_gpu_layout(bytes).map_err(|e| format!("segment {id}: {e}"))
+}
+
 /// Whether a segment's header carries [`GEOMETRY_MESHOPT`] (false for anything too short).
 pub fn is_compressed(bytes: &[u8]) -> bool {
     compressed_header(bytes).is_some()
@@ -202,15 +231,34 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<u8>, String> {
     if !ni.is_multiple_of(3) {
         return Err("geometry index count is not a multiple of 3".into());
     }
+    // What decoding may allocate is what the checked counts need, and no more.
+    let need = nv * std::mem::size_of::<Packed>() + ni * 4;
+    let mut ws = Workspace::new(Limits {
+        max_bytes: need.max(1 << 16) * 2,
+        ..Limits::default()
+    });
     let packed: Vec<Packed> = if nv == 0 {
         Vec::new()
     } else {
-        meshopt::decode_vertex_buffer(vs, nv).map_err(|e| format!("vertex stream: {e}"))?
+        let raw = meshoptimizer_rs::codec::decode_vertex_buffer(
+            nv,
+            std::mem::size_of::<Packed>(),
+            vs,
+            &mut ws,
+        )
+        .map_err(|e| format!("vertex stream: {e}"))?;
+        raw.chunks_exact(std::mem::size_of::<Packed>())
+            .map(bytemuck::pod_read_unaligned)
+            .collect()
     };
     let indices: Vec<u32> = if ni == 0 {
         Vec::new()
     } else {
-        meshopt::decode_index_buffer(is, ni).map_err(|e| format!("index stream: {e}"))?
+        let raw = meshoptimizer_rs::codec::decode_index_buffer(ni, 4, is, &mut ws)
+            .map_err(|e| format!("index stream: {e}"))?;
+        raw.chunks_exact(4)
+            .map(bytemuck::pod_read_unaligned)
+            .collect()
     };
     if let Some(bad) = indices.iter().find(|&&i| i as usize >= nv) {
         return Err(format!(

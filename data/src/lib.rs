@@ -16,7 +16,6 @@ pub mod bake;
 pub mod build;
 pub mod bulk;
 pub mod cells;
-#[cfg(feature = "native")]
 pub mod codec;
 pub mod error;
 pub mod format;

@@ -163,6 +163,28 @@ fn plain_segments_pass_through_and_compressed_ones_are_not_parsed_raw() {
     );
 }
 
+#[test]
+fn a_compressed_segment_decodes_only_to_what_its_lod_record_says() {
+    // What the client's IO stage (native) and the page (wasm) call for each geometry segment.
+    let packed = encode(&quad());
+    let plain = encode_geometry(&quad());
+    let size = plain.len() as u64;
+    let decoded = codec::to_gpu_layout_as(7, &packed, Some(size)).unwrap();
+    assert_eq!(decoded.len() as u64, size);
+    // A record that promises another size, or none, refuses the segment before decoding.
+    for expected in [Some(size + 4), Some(size - 4), None] {
+        let err = codec::to_gpu_layout_as(7, &packed, expected).unwrap_err();
+        assert!(
+            err.starts_with("segment 7: its counts (4 vertices, 6 indices) disagree"),
+            "{err}"
+        );
+    }
+    // A plain segment needs no record; a broken one is named.
+    assert!(codec::to_gpu_layout_as(7, &plain, None).is_ok());
+    let err = codec::to_gpu_layout_as(9, &plain[..20], None).unwrap_err();
+    assert!(err.starts_with("segment 9: "), "{err}");
+}
+
 /// A grid of `n` vertices in strips (many codec blocks; wide indices past 65,536 vertices).
 fn strip(n: u32) -> Mesh {
     let w = 256u32;

@@ -123,17 +123,11 @@ impl Http {
                 .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
             return Ok(Payload::Stab(Arc::new(list)));
         }
-        // A compressed segment is decoded here, on the IO thread, into the layout GPUs bind;
-        // first what it claims to decode to must be what its LOD record says, which bounds
-        // what decoding allocates.
-        if let Some(h) = portico_data::codec::compressed_header(bytes) {
-            let claims = portico_data::geometry::plain_size(h.vertex_count, h.index_count / 3);
-            if self.catalogue.decoded.get(&id) != Some(&claims) || h.index_count % 3 != 0 {
-                anyhow::bail!("segment {id}: its counts disagree with its LOD record");
-            }
-        }
-        let plain = portico_data::codec::to_gpu_layout(bytes)
-            .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
+        // A compressed segment is decoded here, on the IO thread, into the layout GPUs bind
+        // (after its counts are checked against its LOD record).
+        let expected = self.catalogue.decoded.get(&id).copied();
+        let plain = portico_data::codec::to_gpu_layout_as(id, bytes, expected)
+            .map_err(anyhow::Error::msg)?;
         let mesh = self
             .uploader
             .upload(&plain)

@@ -224,6 +224,11 @@ impl Io {
         }
     }
 
+    /// What geometry segment `id` occupies decoded, by its LOD record (bytes).
+    pub fn decoded_size(&self, id: u32) -> Option<u64> {
+        self.catalogue.decoded.get(&id).copied()
+    }
+
     /// Segments the cache released (the stream's server forgets it sent them).
     pub fn evicted(&self, ids: Vec<u32>) {
         if let Some((s, _)) = &self.stream {

@@ -65,8 +65,9 @@ pub struct Stats {
     /// Most GPU memory the renderer's meshes held at the end of a frame, wherever they were
     /// kept (the cache or anywhere else): what the budget must bound.
     pub gpu_held_peak_bytes: u64,
-    /// Segments that arrived intact but could not be used (a compressed segment, a mesh over
-    /// the device's limits): reported as held so that they are not sent again.
+    /// Segments that arrived intact but could not be used (a mesh over the device's limits,
+    /// a compressed segment that does not decode): reported as held so that they are not sent
+    /// again.
     pub unusable_segments: u64,
     /// Segments and bytes received (wire).
     pub segments_received: u64,
@@ -142,13 +143,19 @@ impl Viewer {
                             .map(|l| (Resident::Stab(Arc::new(l)), bytes.len() as u64))
                             .map_err(|e| format!("segment {id}: {e}"))
                     } else {
-                        self.renderer
-                            .upload(&bytes)
+                        // A compressed segment is decoded here (the page has one thread),
+                        // after its counts are checked against its LOD record.
+                        let expected = self.io.decoded_size(id);
+                        portico_data::codec::to_gpu_layout_as(id, &bytes, expected)
+                            .and_then(|plain| {
+                                self.renderer
+                                    .upload(&plain)
+                                    .map_err(|e| format!("segment {id}: {e}"))
+                            })
                             .map(|m| {
                                 let charge = m.gpu_bytes().max(bytes.len() as u64);
                                 (Resident::Mesh(m), charge)
                             })
-                            .map_err(|e| format!("segment {id}: {e}"))
                     };
                     match made {
                         Ok((value, charge)) => match self.cache.insert(id, value, charge) {
