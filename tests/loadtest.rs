@@ -253,3 +253,44 @@ fn prefetch_beats_demand_fetch_over_the_whole_run_on_a_slow_link() {
         demand.objects_skipped_mean
     );
 }
+
+#[test]
+fn a_cache_sweep_runs_every_budget_with_both_baselines_and_judges_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let (server, db) = serve_tiny(dir.path());
+    let out = dir.path().join("sweep");
+    let mut cfg = config(server, tour(&db), out.clone());
+    cfg.max_frames = Some(30);
+    let mut runs = std::collections::BTreeSet::new();
+    let (rows, summaries) =
+        portico_lab::loadtest::cache_sweep::sweep(&cfg, &[1, 16], &mut |run, _, _| {
+            runs.insert(run);
+        })
+        .unwrap();
+    assert_eq!(runs.into_iter().collect::<Vec<_>>(), [0, 1]);
+    assert_eq!(rows.iter().map(|r| r.cache_mb).collect::<Vec<_>>(), [1, 16]);
+    for (r, s) in rows.iter().zip(&summaries) {
+        assert_eq!(s.cache_bytes, r.cache_mb << 20);
+        assert_eq!(names(s).len(), 3, "{:?}", names(s));
+        assert!(r.prefetch.is_some() && r.demand.is_some() && r.oracle.is_some());
+        // Each budget's own run, with its own report.
+        let sub = out.join(format!("cache-{}mb", r.cache_mb));
+        assert!(sub.join("summary.json").is_file() && sub.join("report.md").is_file());
+        // Every run at every budget keeps to its budget.
+        for p in &s.policies {
+            assert!(p.cache_budget_bytes <= s.cache_bytes, "{}", p.name);
+            assert!(p.cache_peak_bytes <= p.cache_budget_bytes, "{}", p.name);
+        }
+    }
+    let md = std::fs::read_to_string(out.join("cache_sweep.md")).unwrap();
+    assert!(md.contains("| 1 | ") && md.contains("| 16 | "), "{md}");
+    assert!(md.contains("at every cache budget"), "{md}");
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("cache_sweep.json")).unwrap()).unwrap();
+    assert_eq!(json.as_array().unwrap().len(), 2);
+    assert!(image::open(out.join("cache_sweep.png")).is_ok());
+    // One budget is not a sweep.
+    let err =
+        portico_lab::loadtest::cache_sweep::sweep(&cfg, &[16], &mut |_, _, _| {}).unwrap_err();
+    assert!(err.to_string().contains("at least two budgets"), "{err}");
+}

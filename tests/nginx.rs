@@ -1,8 +1,8 @@
 //! The scaled-out deployment of `docker/`, without Docker: Debian's nginx with
 //! `docker/nginx.conf.template` in front of three `portico serve` processes on loopback ports.
 //! A client walks through nginx while one replica is killed mid-run; segments come from
-//! nginx's cache on the second read; the WebSocket stream passes the proxy; a short load test
-//! runs through the proxy on the replicas left.
+//! nginx's cache on the second read; the WebSocket stream and the browser viewer's files pass
+//! the proxy; a short load test runs through the proxy on the replicas left.
 //!
 //! Needs `nginx` on the PATH or in /usr/sbin (`.ci/run` installs it). Without it the test
 //! prints why and passes, unless `CI` is set, where a missing nginx is a failure.
@@ -67,13 +67,8 @@ fn build_tiny(dir: &Path) -> PathBuf {
     db
 }
 
-/// Starts a replica on a free port; returns it and its address (read from its start-up line).
-fn replica(db: &Path) -> (Proc, String) {
-    let (p, addr, _) = replica_with(db, &[]);
-    (p, addr)
-}
-
-/// A replica with more `serve` flags; also returns its log lines (stderr) as they come.
+/// Starts a replica on a free port with these `serve` flags; returns it, its address (read from
+/// its start-up line) and its log lines (stderr) as they come.
 fn replica_with(db: &Path, flags: &[&str]) -> (Proc, String, std::sync::mpsc::Receiver<String>) {
     let mut args = vec!["serve", db.to_str().unwrap(), "--listen", "127.0.0.1:0"];
     args.extend(flags);
@@ -181,10 +176,51 @@ fn three_replicas_behind_nginx_survive_losing_one() {
     };
     let dir = tempfile::tempdir().unwrap();
     let db = build_tiny(dir.path());
-    let mut replicas: Vec<(Proc, String)> = (0..3).map(|_| replica(&db)).collect();
+    // The browser viewer, where `web/build.sh` built it (CI does).
+    let viewer = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/viewer");
+    let viewer = portico_server::viewer::is_built(&viewer).then_some(viewer);
+    assert!(
+        viewer.is_some() || std::env::var_os("CI").is_none(),
+        "no built viewer in target/viewer, but CI is set"
+    );
+    let flags: Vec<&str> = match &viewer {
+        Some(v) => vec!["--viewer", v.to_str().unwrap()],
+        None => Vec::new(),
+    };
+    let mut replicas: Vec<(Proc, String)> = (0..3)
+        .map(|_| {
+            let (p, addr, _) = replica_with(&db, &flags);
+            (p, addr)
+        })
+        .collect();
     let addrs: Vec<String> = replicas.iter().map(|(_, a)| a.clone()).collect();
     let (_nginx, base) = start_nginx(&nginx, dir.path(), &addrs);
     let rt = tokio::runtime::Runtime::new().unwrap();
+
+    // The browser viewer's page and module pass the proxy: gzipped where the browser accepts
+    // it, revalidated (no-cache) and marked as varying by encoding for nginx and CDNs.
+    if viewer.is_some() {
+        rt.block_on(async {
+            let http = reqwest::Client::new();
+            let page = http.get(format!("{base}/")).send().await.unwrap();
+            assert_eq!(page.status(), 200);
+            assert_eq!(page.headers()["cache-control"], "no-cache");
+            assert!(page.text().await.unwrap().contains("portico_web.js"));
+            let module = http
+                .get(format!("{base}/portico_web_bg.wasm"))
+                .header("accept-encoding", "gzip")
+                .send()
+                .await
+                .unwrap();
+            assert_eq!(module.status(), 200);
+            let h = module.headers();
+            assert_eq!(h["content-type"], "application/wasm");
+            assert_eq!(h["content-encoding"], "gzip");
+            assert_eq!(h["vary"], "accept-encoding");
+            let body = module.bytes().await.unwrap();
+            assert_eq!(&body[..2], &[0x1f, 0x8b], "a gzip stream");
+        });
+    }
 
     // Content-named segments are served from nginx's cache the second time.
     rt.block_on(async {

@@ -183,6 +183,7 @@ pub fn loadtest(s: &LoadtestSummary) -> Vec<Verdict> {
         },
     ));
     if let Some(o) = oracle {
+        out.extend(against_oracle(p, o));
         let ratio = p.bytes_fetched as f64 / o.bytes_fetched.max(1) as f64;
         out.push(v(
             "bytes fetched, prefetch",
@@ -203,6 +204,84 @@ pub fn loadtest(s: &LoadtestSummary) -> Vec<Verdict> {
         ));
     }
     out
+}
+
+/// How many times the oracle's objects skipped per frame prefetch may skip, over the whole run.
+pub const ORACLE_OBJECTS_FACTOR: f64 = 1.25;
+/// How many more LODs skipped per frame than the oracle's prefetch may skip.
+pub const ORACLE_LODS_SLACK: f64 = 0.02;
+
+/// Prefetch against the oracle over the whole run, warm-up included: objects skipped ≤
+/// [`ORACLE_OBJECTS_FACTOR`]× the oracle's, LODs skipped ≤ the oracle's +
+/// [`ORACLE_LODS_SLACK`].
+fn against_oracle(p: &PolicyResult, o: &PolicyResult) -> [Verdict; 2] {
+    let objects_met = p.objects_skipped_mean <= o.objects_skipped_mean * ORACLE_OBJECTS_FACTOR;
+    let lods_met = p.lods_skipped_mean <= o.lods_skipped_mean + ORACLE_LODS_SLACK;
+    [
+        v(
+            "objects skipped per frame, prefetch vs oracle (warm-up included)",
+            format!("≤ {ORACLE_OBJECTS_FACTOR}× the oracle's"),
+            format!(
+                "{:.2} vs {:.2}",
+                p.objects_skipped_mean, o.objects_skipped_mean
+            ),
+            objects_met,
+            if objects_met {
+                "Prefetch had the objects in view nearly as soon as a client that knows the                  path."
+                    .into()
+            } else {
+                "A client that knows the path has the objects in view sooner: the lookahead's                  order or its cold start costs frames."
+                    .into()
+            },
+        ),
+        v(
+            "LODs skipped per frame, prefetch vs oracle (warm-up included)",
+            format!("≤ the oracle's + {ORACLE_LODS_SLACK}"),
+            format!("{:.3} vs {:.3}", p.lods_skipped_mean, o.lods_skipped_mean),
+            lods_met,
+            if lods_met {
+                "The finer LODs arrived about as soon as a client that knows the path has them."
+                    .into()
+            } else {
+                "The finer LODs arrive later than for a client that knows the path.".into()
+            },
+        ),
+    ]
+}
+
+/// The cache sweep's verdict: prefetch skips no more objects per frame than demand fetch (within
+/// [`NO_WORSE_SLACK`](crate::loadtest::cache_sweep::NO_WORSE_SLACK)) at every cache budget;
+/// not met, naming the budgets, where it does (or where a budget has no baselines).
+pub fn cache_sweep(rows: &[crate::loadtest::cache_sweep::Row]) -> Verdict {
+    let worse: Vec<String> = rows
+        .iter()
+        .filter(|r| r.no_worse_than_demand() != Some(true))
+        .map(|r| match (&r.prefetch, &r.demand) {
+            (Some(p), Some(d)) => format!(
+                "{} MiB: {:.2} vs {:.2}",
+                r.cache_mb, p.objects_skipped_mean, d.objects_skipped_mean
+            ),
+            _ => format!("{} MiB: no prefetch or no demand run", r.cache_mb),
+        })
+        .collect();
+    let met = worse.is_empty() && !rows.is_empty();
+    let sizes: Vec<String> = rows.iter().map(|r| r.cache_mb.to_string()).collect();
+    v(
+        "objects skipped per frame, prefetch vs demand fetch, at every cache budget",
+        "≤ demand fetch's at each budget".into(),
+        if met {
+            format!("no worse at {} MiB", sizes.join(", "))
+        } else {
+            format!("worse at {}", worse.join("; "))
+        },
+        met,
+        if met {
+            "The lookahead fits the cache beside the current view at every budget.".into()
+        } else {
+            "Where the cache is small, reading ahead evicts what the next frames draw              (thrash): the lookahead must stop at the budget left after the current view              (Funkhouser §5.3)."
+                .into()
+        },
+    )
 }
 
 /// Prefetch against demand fetch on LODs skipped: ≥ 5× fewer, or both nearly none.

@@ -44,9 +44,11 @@ pub struct Args {
     /// 10mbit, 1gbit, 500kbit).
     #[arg(long, default_value = "rtt=20ms,rate=100mbit")]
     link: String,
-    /// Cache budget per client, MiB (2^20 bytes).
-    #[arg(long, default_value_t = 64)]
-    cache_mb: u64,
+    /// Cache budget per client, MiB (2^20 bytes); several (e.g. 4,16,64,256) run the whole
+    /// load test at each and compare them (`DIR/cache-<N>mb/`, `DIR/cache_sweep.md` and `.png`).
+    #[arg(long, value_delimiter = ',', default_value = "64", value_name = "MB",
+          value_parser = clap::value_parser!(u64).range(1..=1 << 20))]
+    cache_mb: Vec<u64>,
     /// Frame budget (and frame time) in milliseconds.
     #[arg(long, default_value_t = 50.0)]
     budget_ms: f64,
@@ -124,11 +126,14 @@ pub fn run(a: Args) -> Result<()> {
         policies,
         baselines: !a.no_baselines,
         link,
-        cache_bytes: a.cache_mb << 20,
+        cache_bytes: a.cache_mb[0] << 20,
         budget_s: a.budget_ms / 1e3,
         max_frames: a.max_frames.or(a.sweep.as_ref().map(|_| SWEEP_FRAMES)),
         out: a.out,
     };
+    if a.cache_mb.len() > 1 {
+        return cache_sweep(&cfg, &a.cache_mb, a.json);
+    }
     let bars = Bars::new();
     let (mut started, mut shown) = (false, 0u64);
     let summary = run_loadtest(&cfg, &mut |done, total| {
@@ -147,6 +152,44 @@ pub fn run(a: Args) -> Result<()> {
     } else {
         print_summary(&summary, &cfg.out);
     }
+    Ok(())
+}
+
+/// `--cache-mb A,B,…`: the load test at each budget, each run's table, then the sweep's table,
+/// verdict and files.
+fn cache_sweep(cfg: &LoadtestConfig, sizes: &[u64], json: bool) -> Result<()> {
+    let bars = Bars::new();
+    let mut current = None;
+    let mut shown = 0u64;
+    let (rows, summaries) =
+        portico_lab::loadtest::cache_sweep::sweep(cfg, sizes, &mut |run, done, total| {
+            if current != Some(run) {
+                bars.start(&format!("loadtest, {} MiB cache", sizes[run]), total);
+                (current, shown) = (Some(run), 0);
+            }
+            if done > shown {
+                bars.inc(done - shown);
+                shown = done;
+            }
+        })?;
+    bars.finish();
+    if json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    for s in &summaries {
+        print_summary(s, &cfg.out.join(format!("cache-{}mb", s.cache_bytes >> 20)));
+    }
+    println!("cache sweep (p / d / o: best prefetch / demand fetch / oracle):");
+    for line in portico_lab::loadtest::cache_sweep::markdown(&rows).lines() {
+        println!("  {line}");
+    }
+    println!("  {}", portico_lab::verdict::cache_sweep(&rows));
+    println!(
+        "  wrote {} and {}",
+        cfg.out.join("cache_sweep.md").display(),
+        cfg.out.join("cache_sweep.png").display()
+    );
     Ok(())
 }
 

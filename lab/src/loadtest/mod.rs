@@ -18,9 +18,11 @@
 //! [`run`] writes `summary.json`, `report.md` (tables in Funkhouser's layout, [`report`]),
 //! `frames.csv` (client 0's frames per policy) and two PNG plots ([`plot`]).
 //!
-//! This file holds the configuration and [`run`]; the summary's types are in `summary`, the
+//! [`cache_sweep`] runs it all at several cache budgets. This file holds the configuration and
+//! [`run`]; the summary's types are in `summary`, the
 //! session that plays every run in `runner`, and the per-policy figures in `aggregate`.
 
+pub mod cache_sweep;
 pub mod cpu;
 pub mod link;
 pub mod plot;
