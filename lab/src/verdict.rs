@@ -227,10 +227,12 @@ fn against_oracle(p: &PolicyResult, o: &PolicyResult) -> [Verdict; 2] {
             ),
             objects_met,
             if objects_met {
-                "Prefetch had the objects in view nearly as soon as a client that knows the                  path."
+                "Prefetch had the objects in view nearly as soon as a client that knows the \
+                 path."
                     .into()
             } else {
-                "A client that knows the path has the objects in view sooner: the lookahead's                  order or its cold start costs frames."
+                "A client that knows the path has the objects in view sooner: the lookahead's \
+                 order or its cold start costs frames."
                     .into()
             },
         ),
@@ -278,7 +280,9 @@ pub fn cache_sweep(rows: &[crate::loadtest::cache_sweep::Row]) -> Verdict {
         if met {
             "The lookahead fits the cache beside the current view at every budget.".into()
         } else {
-            "Where the cache is small, reading ahead evicts what the next frames draw              (thrash): the lookahead must stop at the budget left after the current view              (Funkhouser §5.3)."
+            "Where the cache is small, reading ahead evicts what the next frames draw \
+             (thrash): the lookahead must stop at the budget left after the current view \
+             (Funkhouser §5.3)."
                 .into()
         },
     )
