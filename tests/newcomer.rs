@@ -196,6 +196,8 @@ fn the_demo_judges_every_figure_against_its_target() {
         "objects skipped per frame, prefetch",
         "first complete frame, prefetch",
         "request-to-resident latency p50, prefetch",
+        "objects skipped per frame, prefetch vs oracle (warm-up included)",
+        "LODs skipped per frame, prefetch vs oracle (warm-up included)",
         "bytes fetched, prefetch",
     ];
     let rows: Vec<&str> = report

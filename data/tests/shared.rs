@@ -260,6 +260,25 @@ fn the_per_client_cut_leaves_out_what_it_holds_and_keeps_the_mandatory_part() {
     // Held segments outside the list are release hints.
     let stray: HashSet<u32> = [u32::MAX - 1].into();
     assert_eq!(list.cut(&stray, 0).evict, vec![u32::MAX - 1]);
+    // Nothing past what fits the client's cache is listed (it would evict what the next frames
+    // draw, to be read again), whatever the read budget: only the mandatory part.
+    assert_eq!(
+        list.fit,
+        list.items.len(),
+        "the default cache holds this list"
+    );
+    let mut small = (*list).clone();
+    small.fit = list.items.len() / 2;
+    let cut = small.cut(&HashSet::new(), u64::MAX);
+    let expected: Vec<u32> = (list.items.iter().zip(&list.must).enumerate())
+        .filter(|(i, (_, m))| *i < small.fit || **m)
+        .map(|(_, (item, _))| item.segment)
+        .collect();
+    assert!(expected.len() < list.items.len());
+    assert_eq!(
+        cut.items.iter().map(|i| i.segment).collect::<Vec<_>>(),
+        expected
+    );
 }
 
 #[test]

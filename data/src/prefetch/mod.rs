@@ -216,8 +216,14 @@ impl Prefetcher {
         Ok(list)
     }
 
-    /// Sets [`NeedList::fit`] for a cache of `cache_bytes`.
+    /// Sets [`NeedList::fit`] for a cache of `cache_bytes`: never before the first geometry
+    /// item, so that a cache too small for anything still gets the first object it would draw.
     fn fit_cache(&self, list: &mut NeedList, cache_bytes: u64) {
+        let first_geometry = list
+            .items
+            .iter()
+            .position(|i| i.kind == NeedKind::Geometry)
+            .map_or(0, |i| i + 1);
         let mut used = 0u64;
         list.fit = list
             .items
@@ -230,7 +236,8 @@ impl Prefetcher {
                     .unwrap_or(i.bytes);
                 used > cache_bytes
             })
-            .unwrap_or(list.items.len());
+            .unwrap_or(list.items.len())
+            .max(first_geometry);
     }
 
     /// Appends the textured boxes of the clusters above the lookahead objects (the objects in
@@ -357,14 +364,16 @@ impl NeedList {
     }
 
     /// The read set for a client holding `held`, cut at `budget` bytes (§5.2.3): everything
-    /// mandatory, then items in order while they fit; and release hints for what it holds
+    /// mandatory, then items in order while they fit the read budget and, with what comes
+    /// before them, the client's cache ([`NeedList::fit`]: reading past it would only evict
+    /// what the next frames draw, to be read again); and release hints for what it holds
     /// outside the lookahead.
     pub fn cut(&self, held: &HashSet<u32>, budget: u64) -> PrefetchResponse {
         let mut items = Vec::new();
         let mut used = 0u64;
         let mut truncated = false;
-        for (item, &must) in self.items.iter().zip(&self.must) {
-            if held.contains(&item.segment) {
+        for (i, (item, &must)) in self.items.iter().zip(&self.must).enumerate() {
+            if held.contains(&item.segment) || (i >= self.fit && !must) {
                 continue;
             }
             if must || (!truncated && used + item.bytes <= budget) {

@@ -171,7 +171,7 @@ fn plot(path: &Path, rows: &[Row], text: bool) -> Result<()> {
         .flat_map(|r| r.runs().into_iter().flatten())
         .map(|f| f.objects_skipped_mean)
         .fold(0.0f64, f64::max);
-    let top = if top > 0.0 { top * 1.15 } else { 1.0 };
+    let top = if top > 0.0 { top * 1.4 } else { 1.0 };
     let mut builder = ChartBuilder::on(&root);
     builder.margin(16);
     if text {
