@@ -293,4 +293,7 @@ fn a_cache_sweep_runs_every_budget_with_both_baselines_and_judges_them() {
     let err =
         portico_lab::loadtest::cache_sweep::sweep(&cfg, &[16], &mut |_, _, _| {}).unwrap_err();
     assert!(err.to_string().contains("at least two budgets"), "{err}");
+    let err = portico_lab::loadtest::cache_sweep::sweep(&cfg, &[4, 16, 4], &mut |_, _, _| {})
+        .unwrap_err();
+    assert!(err.to_string().contains("4 MiB is given twice"), "{err}");
 }

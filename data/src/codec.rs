@@ -216,10 +216,12 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<u8>, String> {
     let vs = stream(h.vertex_offset, h.reserved[0], "vertex")?;
     let is = stream(h.index_offset, h.reserved[1], "index")?;
     let (nv, ni) = (h.vertex_count as usize, h.index_count as usize);
+    // In u64: on wasm32 a usize product of a few megabytes would wrap.
     let too_many = h.vertex_count > MAX_DECODED_COUNT
         || h.index_count > MAX_DECODED_COUNT
-        || nv * std::mem::size_of::<Packed>() > (vs.len() + 64) * MAX_VERTEX_EXPANSION
-        || ni > is.len() * 3;
+        || nv as u64 * std::mem::size_of::<Packed>() as u64
+            > (vs.len() as u64 + 64) * MAX_VERTEX_EXPANSION as u64
+        || ni as u64 > is.len() as u64 * 3;
     if too_many {
         return Err(format!(
             "compressed geometry segment claims {nv} vertices and {ni} indices: more than its \
@@ -231,35 +233,32 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<u8>, String> {
     if !ni.is_multiple_of(3) {
         return Err("geometry index count is not a multiple of 3".into());
     }
-    // What decoding may allocate is what the checked counts need, and no more.
-    let need = nv * std::mem::size_of::<Packed>() + ni * 4;
-    let mut ws = Workspace::new(Limits {
-        max_bytes: need.max(1 << 16) * 2,
-        ..Limits::default()
-    });
-    let packed: Vec<Packed> = if nv == 0 {
-        Vec::new()
-    } else {
-        let raw = meshoptimizer_rs::codec::decode_vertex_buffer(
+    // The decoders write into buffers sized by the counts checked above (at most
+    // MAX_DECODED_COUNT each); the workspace is the codecs' scratch, bounded by the crate's
+    // default limits.
+    let mut ws = Workspace::new(Limits::default());
+    let mut packed = vec![Packed::zeroed(); nv];
+    if nv > 0 {
+        meshoptimizer_rs::codec::decode_vertex_buffer_into(
+            bytemuck::cast_slice_mut(&mut packed),
             nv,
             std::mem::size_of::<Packed>(),
             vs,
             &mut ws,
         )
         .map_err(|e| format!("vertex stream: {e}"))?;
-        raw.chunks_exact(std::mem::size_of::<Packed>())
-            .map(bytemuck::pod_read_unaligned)
-            .collect()
-    };
-    let indices: Vec<u32> = if ni == 0 {
-        Vec::new()
-    } else {
-        let raw = meshoptimizer_rs::codec::decode_index_buffer(ni, 4, is, &mut ws)
-            .map_err(|e| format!("index stream: {e}"))?;
-        raw.chunks_exact(4)
-            .map(bytemuck::pod_read_unaligned)
-            .collect()
-    };
+    }
+    let mut indices = vec![0u32; ni];
+    if ni > 0 {
+        meshoptimizer_rs::codec::decode_index_buffer_into(
+            bytemuck::cast_slice_mut(&mut indices),
+            ni,
+            4,
+            is,
+            &mut ws,
+        )
+        .map_err(|e| format!("index stream: {e}"))?;
+    }
     if let Some(bad) = indices.iter().find(|&&i| i as usize >= nv) {
         return Err(format!(
             "geometry index {bad} out of range for {nv} vertices"

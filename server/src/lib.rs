@@ -85,8 +85,13 @@ async fn auth(State(s): State<Arc<AppState>>, req: Request, next: Next) -> Respo
     let from_query = upgrade
         .then(|| req.uri().query())
         .flatten()
-        .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")));
-    let given = from_header.or(from_query).unwrap_or("");
+        .and_then(|q| q.split('&').find_map(|kv| kv.strip_prefix("token=")))
+        // Browsers percent-encode it (`encodeURIComponent`): `+`, `/` and `=` arrive escaped.
+        .map(|t| percent_encoding::percent_decode_str(t).decode_utf8_lossy());
+    let given = from_header
+        .map(std::borrow::Cow::Borrowed)
+        .or(from_query)
+        .unwrap_or_default();
     if constant_time_eq(given.as_bytes(), token.as_bytes()) {
         next.run(req).await
     } else {

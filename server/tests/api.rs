@@ -294,10 +294,15 @@ async fn bad_requests_get_json_errors_and_the_server_keeps_serving() {
     );
 }
 
+/// A token with characters a query string must escape (as base64 tokens have).
+const TOKEN: &str = "s3c+r/t=";
+/// [`TOKEN`] percent-encoded (`encodeURIComponent`).
+const TOKEN_IN_QUERY: &str = "s3c%2Br%2Ft%3D";
+
 #[tokio::test]
 async fn a_token_guards_every_api_route_but_not_health() {
     let s = start(Config {
-        token: Some("s3cret".into()),
+        token: Some(TOKEN.into()),
         ..Config::default()
     })
     .await;
@@ -322,7 +327,7 @@ async fn a_token_guards_every_api_route_but_not_health() {
         // A query token is refused on plain HTTP routes: query strings end up in access logs.
         let q = if r.contains('?') { "&" } else { "?" };
         error_of(
-            http.get(format!("{url}{q}token=s3cret"))
+            http.get(format!("{url}{q}token={TOKEN}"))
                 .send()
                 .await
                 .unwrap(),
@@ -331,7 +336,7 @@ async fn a_token_guards_every_api_route_but_not_health() {
         .await;
         assert_eq!(
             http.get(&url)
-                .bearer_auth("s3cret")
+                .bearer_auth(TOKEN)
                 .send()
                 .await
                 .unwrap()
@@ -346,7 +351,7 @@ async fn a_token_guards_every_api_route_but_not_health() {
         let wrong = http.post(&url).bearer_auth("wrong").body("{}");
         error_of(wrong.send().await.unwrap(), 401).await;
         // With the token the request gets past auth (and fails as the empty body it is).
-        let right = http.post(&url).bearer_auth("s3cret").body("{}");
+        let right = http.post(&url).bearer_auth(TOKEN).body("{}");
         let status = right.send().await.unwrap().status();
         assert_ne!(status, 401, "{r} refused the right token");
     }
@@ -365,9 +370,11 @@ async fn a_token_guards_every_api_route_but_not_health() {
             Err(e) => panic!("{url}: refused, but not with 401: {e}"),
         }
     }
-    let (mut sock, _) = tokio_tungstenite::connect_async(format!("{ws}/v1/stream?token=s3cret"))
-        .await
-        .expect("a stream with the query token");
+    // The query token is percent-encoded, as the browser page sends it.
+    let (mut sock, _) =
+        tokio_tungstenite::connect_async(format!("{ws}/v1/stream?token={TOKEN_IN_QUERY}"))
+            .await
+            .expect("a stream with the query token");
     let _ = sock.close(None).await;
     assert_eq!(
         http.get(format!("{}/healthz", s.base))

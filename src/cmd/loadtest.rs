@@ -105,6 +105,11 @@ pub fn run(a: Args) -> Result<()> {
     if !(1.0..=10_000.0).contains(&a.budget_ms) {
         anyhow::bail!("--budget-ms must be 1..=10000, not {}", a.budget_ms);
     }
+    if a.cache_mb.len() > 1 && !a.stress.is_empty() {
+        anyhow::bail!(
+            "--cache-mb with several budgets is a sweep of the policy runs, not of --stress"
+        );
+    }
     let path = crate::cmd::walk::load_path(&a.server, a.token.clone(), &a.route)?;
     if a.stream {
         // An unlimited link: the server's own cap on each session's rate.

@@ -59,6 +59,29 @@ fn param(name: &str) -> Option<String> {
         .get(name)
 }
 
+/// Takes `token` out of the address once it is read, so that the address people share for the
+/// viewpoint never carries it (a reload then needs it again).
+fn forget_token() {
+    let Some(w) = web_sys::window() else { return };
+    let loc = w.location();
+    let (Ok(path), Ok(search), Ok(hash)) = (loc.pathname(), loc.search(), loc.hash()) else {
+        return;
+    };
+    let Ok(params) = web_sys::UrlSearchParams::new_with_str(&search) else {
+        return;
+    };
+    params.delete("token");
+    let rest = String::from(params.to_string());
+    let query = if rest.is_empty() {
+        String::new()
+    } else {
+        format!("?{rest}")
+    };
+    if let Ok(h) = w.history() {
+        let _ = h.replace_state_with_url(&JsValue::NULL, "", Some(&format!("{path}{query}{hash}")));
+    }
+}
+
 /// The viewpoint in the fragment (`#eye=x,y,z&dir=x,y,z`), if it has one.
 fn viewpoint_from_hash() -> Option<(Vec3, Vec3)> {
     let hash = web_sys::window()?.location().hash().ok()?;
@@ -95,6 +118,9 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         .map_err(|_| format!("#{canvas_id} is not a canvas"))?;
     let server = param("server").unwrap_or_default();
     let token = param("token").filter(|t| !t.is_empty());
+    if token.is_some() {
+        forget_token();
+    }
     let cache_mb: u64 = param("cache_mb")
         .and_then(|s| s.parse().ok())
         .unwrap_or(64)

@@ -216,14 +216,10 @@ impl Prefetcher {
         Ok(list)
     }
 
-    /// Sets [`NeedList::fit`] for a cache of `cache_bytes`: never before the first geometry
-    /// item, so that a cache too small for anything still gets the first object it would draw.
+    /// Sets [`NeedList::fit`] for a cache of `cache_bytes`. When the first geometry item falls
+    /// past it, that item becomes mandatory: a cache too small for anything still gets the
+    /// first object it would draw (and nothing else past the fit).
     fn fit_cache(&self, list: &mut NeedList, cache_bytes: u64) {
-        let first_geometry = list
-            .items
-            .iter()
-            .position(|i| i.kind == NeedKind::Geometry)
-            .map_or(0, |i| i + 1);
         let mut used = 0u64;
         list.fit = list
             .items
@@ -236,8 +232,11 @@ impl Prefetcher {
                     .unwrap_or(i.bytes);
                 used > cache_bytes
             })
-            .unwrap_or(list.items.len())
-            .max(first_geometry);
+            .unwrap_or(list.items.len());
+        let first_geometry = list.items.iter().position(|i| i.kind == NeedKind::Geometry);
+        if let Some(i) = first_geometry.filter(|&i| i >= list.fit) {
+            list.must[i] = true;
+        }
     }
 
     /// Appends the textured boxes of the clusters above the lookahead objects (the objects in
@@ -314,7 +313,8 @@ pub struct NeedList {
     pub items: Vec<NeedItem>,
     /// Per item: read whatever the budget (a stab list, or the coarsest LOD of an object
     /// visible from the eye cell: Funkhouser's read set is not complete until everything
-    /// visible now is resident or being read).
+    /// visible now is resident or being read; or the first geometry item when even that falls
+    /// past [`NeedList::fit`]).
     pub must: Vec<bool>,
     /// The items' segments, for membership tests.
     pub segments: HashSet<u32>,

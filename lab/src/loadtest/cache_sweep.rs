@@ -91,7 +91,7 @@ impl Row {
 }
 
 /// Runs the load test at each budget of `sizes_mb` (MiB, at least two, each > 0) with the
-/// rest of `cfg`, writes each run's outputs into `cfg.out/cache-<N>mb/` and the sweep's into
+/// rest of `cfg` (no budget twice), writes each run's outputs into `cfg.out/cache-<N>mb/` and the sweep's into
 /// `cfg.out`, and returns the rows with the runs' summaries. `progress(run, done, total)`
 /// reports each run's client frames.
 ///
@@ -104,6 +104,12 @@ pub fn sweep(
 ) -> Result<(Vec<Row>, Vec<LoadtestSummary>)> {
     if sizes_mb.len() < 2 || sizes_mb.contains(&0) {
         bail!("--cache-mb: a sweep needs at least two budgets, each at least 1 MiB");
+    }
+    if let Some(d) = sizes_mb
+        .iter()
+        .find(|&&a| sizes_mb.iter().filter(|&&b| b == a).count() > 1)
+    {
+        bail!("--cache-mb: {d} MiB is given twice");
     }
     let mut summaries = Vec::with_capacity(sizes_mb.len());
     for (i, &mb) in sizes_mb.iter().enumerate() {
