@@ -1,9 +1,13 @@
-//! What every plot of the lab shares: one palette and one font. plotters draws text only with a
+//! What every plot of the lab shares: one palette, one font and one legend box. plotters draws text only with a
 //! font registered at run time: [`fonts_available`] loads DejaVu Sans from [`FONT_PATH`] once (Debian's
 //! `fonts-dejavu-core`). Without it the plots are drawn without any text (no caption, tick
 //! labels or legend) instead of failing, and the reports say so.
 
-use plotters::style::{FontStyle, RGBColor};
+use plotters::chart::{ChartContext, SeriesLabelPosition};
+use plotters::coord::CoordTranslate;
+use plotters::drawing::DrawingAreaErrorKind;
+use plotters::prelude::DrawingBackend;
+use plotters::style::{BLACK, Color, FontStyle, RGBColor, WHITE};
 use std::sync::OnceLock;
 
 /// Line colours: strong and distinct on white (plotters' Palette99 starts with pale yellows),
@@ -35,4 +39,26 @@ pub fn fonts_available() -> bool {
         let bytes: &'static [u8] = Box::leak(bytes.into_boxed_slice());
         plotters::style::register_font("sans-serif", FontStyle::Normal, bytes).is_ok()
     })
+}
+
+/// Draws the legend of the series labelled so far at `position`: a white box with a black
+/// border and 14 px text (needs [`fonts_available`]).
+///
+/// # Errors
+/// What the drawing backend reports.
+pub fn legend<'a, DB, CT>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>>
+where
+    DB: DrawingBackend + 'a,
+    CT: CoordTranslate,
+{
+    chart
+        .configure_series_labels()
+        .position(position)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .draw()
 }

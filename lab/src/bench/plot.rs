@@ -161,14 +161,7 @@ fn draw_chart(
         }
     }
     if text {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .label_font(("sans-serif", 13))
-            .draw()
-            .map_err(plot_error)?;
+        crate::style::legend(&mut chart, SeriesLabelPosition::UpperRight).map_err(plot_error)?;
     }
     Ok(())
 }

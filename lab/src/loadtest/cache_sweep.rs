@@ -220,14 +220,7 @@ fn plot(path: &Path, rows: &[Row], text: bool) -> Result<()> {
         }
     }
     if text {
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()
-            .map_err(|e| err(&e))?;
+        crate::style::legend(&mut chart, SeriesLabelPosition::UpperRight).map_err(|e| err(&e))?;
     }
     root.present().map_err(|e| err(&e))
 }

@@ -181,13 +181,7 @@ where
         chart.draw_series(pts.iter().map(|&p| Circle::new(p, 5, color.filled())))?;
     }
     if text {
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::UpperLeft)
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .draw()?;
+        crate::style::legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
     }
     Ok(())
 }
