@@ -19,7 +19,7 @@ struct Cli {
 enum Command {
     /// Generate a furnished building as glTF (GLB).
     Generate(cmd::generate::Args),
-    /// Build a display database (.portico) from OBJ / glTF / GLB models.
+    /// Build a display database (.portico) from OBJ / glTF / GLB / IFC models.
     Build(cmd::build::Args),
     /// Print statistics of a display database.
     Inspect(cmd::inspect::Args),

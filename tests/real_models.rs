@@ -150,3 +150,32 @@ fn roomless_models_get_an_orbit_and_a_flythrough() {
     let duration = keys.last().unwrap()["t"].as_f64().unwrap();
     assert!(duration > 12.0, "{duration} s");
 }
+
+#[test]
+fn the_ifc_house_builds_with_its_rooms_as_cells_verifies_and_walks() {
+    let Some(m) = corpus("IFC/AC14-FZK-Haus.ifc") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("haus.portico");
+    let out = portico(&["build", m.to_str().unwrap(), "-o", db.to_str().unwrap()]);
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert!(!log.contains("warning"), "{log}");
+    let inspect: serde_json::Value =
+        serde_json::from_slice(&portico(&["inspect", db.to_str().unwrap(), "--json"]).stdout)
+            .unwrap();
+    let stats = &inspect["cell_stats"];
+    let live = stats["live_cells"].as_u64().unwrap();
+    // Seven rooms, their door and window openings, the stair's hole, the outside.
+    assert!((20..=80).contains(&live), "{stats}");
+    // Occlusion culling is left: a cell sees far from every object.
+    let seen = stats["objects_visible"][0].as_f64().unwrap();
+    let objects = inspect["objects"].as_u64().unwrap() as f64;
+    assert!(seen < 0.95 * objects, "{seen} of {objects}: {stats}");
+    let verify: serde_json::Value = serde_json::from_slice(
+        &portico(&["verify", db.to_str().unwrap(), "--rays", "20000", "--json"]).stdout,
+    )
+    .unwrap();
+    assert_eq!(verify["false_negatives"], 0, "{verify}");
+    assert_seen("AC14-FZK-Haus.ifc", &walk_model(&m));
+}

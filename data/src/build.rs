@@ -5,7 +5,7 @@
 //! written in order, so the same input always gives the same file.
 
 use crate::bake::bake;
-use crate::cells::occluders::{Occluders, occluder_boxes};
+use crate::cells::occluders::{Occluders, occluder_boxes, transform_box};
 use crate::cells::{CellStats, precompute};
 use crate::error::Result;
 use crate::format::writer::{DbWriter, WriteSummary};
@@ -100,16 +100,22 @@ pub fn build_with(
         sources,
         origin,
         warnings: _,
+        spaces,
     } = model;
     // Occluders come from the source meshes, before LOD optimisation reorders their triangles.
     let occluders = (!opts.no_cells).then(|| {
-        occluder_boxes(instances.iter().filter_map(|i| {
+        let mut occ = occluder_boxes(instances.iter().filter_map(|i| {
             Some((
                 defs.get(i.def as usize)?.lods.first()?,
                 i.transform,
                 i.occluder,
             ))
-        }))
+        }));
+        occ.rooms = spaces
+            .iter()
+            .filter_map(|s| transform_box(&s.bounds, &Mat4::IDENTITY))
+            .collect();
+        occ
     });
     obs.stage("LODs", defs.len() as u64);
     let lods: Vec<(String, u32, Vec<LodMesh>)> = defs

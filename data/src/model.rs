@@ -57,6 +57,18 @@ pub struct Instance {
     pub tags: BTreeMap<String, String>,
 }
 
+/// A room the source names (an IFC `IfcSpace`): the cell subdivision splits along its box, so
+/// that cells follow the building's own rooms.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Space {
+    /// The room's name (`LongName`, else `Name`).
+    pub name: String,
+    /// The storey it is on, when the source says.
+    pub storey: Option<String>,
+    /// Its bounding box, in the model's local coordinates (metres, Y up).
+    pub bounds: Aabb,
+}
+
 /// A whole imported model.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Model {
@@ -74,6 +86,8 @@ pub struct Model {
     pub origin: [f64; 3],
     /// What the importers noticed and worked around (one line each, without the file name).
     pub warnings: Vec<String>,
+    /// The rooms the source names (IFC spaces); empty for formats without rooms.
+    pub spaces: Vec<Space>,
 }
 
 impl Model {
@@ -101,6 +115,11 @@ impl Model {
             }));
         self.sources.extend(other.sources);
         self.warnings.extend(other.warnings);
+        let shift = shift.as_mat4();
+        self.spaces.extend(other.spaces.into_iter().map(|mut s| {
+            s.bounds = s.bounds.transformed(&shift);
+            s
+        }));
     }
 
     /// World-space bounds of every instance's finest LOD.

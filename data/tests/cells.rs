@@ -54,6 +54,7 @@ fn quiet_precompute(bounds: &Aabb, boxes: &[Aabb], objects: &[Aabb]) -> (CellGra
     let occ = Occluders {
         faces: faces_of(boxes),
         solids: boxes.to_vec(),
+        rooms: Vec::new(),
     };
     let p = precompute(bounds, &occ, objects, &|_, _| {}, &|| {});
     (p.graph, p.stabs)

@@ -12,7 +12,7 @@ use std::time::Instant;
 /// Arguments of `portico build`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// Model files: .obj (with .mtl), .gltf or .glb.
+    /// Model files: .obj (with .mtl), .gltf, .glb or .ifc.
     #[arg(required = true)]
     models: Vec<PathBuf>,
     /// Output display database (.portico).

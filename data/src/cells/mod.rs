@@ -1,7 +1,8 @@
 //! Cells, portals and visibility (Funkhouser §3.2 and §4.1; Teller's cells-and-portals).
 //!
 //! - [`occluders`]: the axis-aligned occluder boxes of a model (tagged walls, floors, ceilings,
-//!   or large box-shaped slabs found automatically in untagged models).
+//!   or large box-shaped slabs found automatically in untagged models); [`cover`] for walls
+//!   and slabs of any triangulation.
 //! - [`subdivide`]: a k-D tree split along the major occluder faces (§3.2.1); a coarse grid when a
 //!   model has no usable occluders.
 //! - [`portals`]: the open rectangles on shared cell boundaries, hence the adjacency graph.
@@ -12,6 +13,7 @@
 //! - [`verify`]: a ray-casting checker for false negatives and overestimation, against the
 //!   objects' real triangles ([`sight`]) or the occluder boxes.
 
+pub mod cover;
 pub mod occluders;
 pub mod polytope;
 pub mod portals;
@@ -357,7 +359,7 @@ pub fn precompute(
 ) -> Precomputed {
     let t0 = std::time::Instant::now();
     let core = bulk_of(bounds, objects);
-    let mut graph = subdivide::subdivide_around(bounds, &core, &occluders.faces);
+    let mut graph = subdivide::subdivide_around(bounds, &core, &occluders.faces, &occluders.rooms);
     portals::find_portals_around(&mut graph, &core, &occluders.faces, &occluders.solids);
     let incidence = stab::incidence(&graph, objects);
     let subdivision_seconds = t0.elapsed().as_secs_f64();

@@ -8,6 +8,9 @@
 //! rotations by multiples of 90°, shifts). Anything else is not used as an occluder: fewer
 //! occluders only means less culling, never a wrong answer.
 //!
+//! Tagged walls and slabs that are not written as boxes (BIM exports triangulate walls around
+//! their openings) give what their triangles cover on both faces instead ([`super::cover`]).
+//!
 //! Untagged models (any imported file) get automatic occluders: faces of any instance with both
 //! extents at least [`AUTO_MIN_EXTENT`] — slabs and walls.
 //!
@@ -169,6 +172,9 @@ pub struct Occluders {
     pub faces: Vec<Aabb>,
     /// Solid boxes (walls, slabs): cells inside them are dead.
     pub solids: Vec<Aabb>,
+    /// Boxes of the rooms the source names (IFC spaces), split along where no occluder
+    /// splits ([`super::subdivide::subdivide_around`]); they occlude nothing.
+    pub rooms: Vec<Aabb>,
 }
 
 /// World occluders for a set of instances, given as (finest mesh in its source triangle order,
@@ -188,6 +194,15 @@ pub fn occluder_boxes<'a>(
         let (pieces, boxes) = cache
             .entry(mesh as *const Mesh)
             .or_insert_with(|| (faces(mesh), solid_boxes(mesh)));
+        if any_tagged && boxes.is_empty() {
+            // Not written as whole boxes (a BIM wall cut around its openings, a gable):
+            // what its triangles cover on both faces.
+            if let Some((s, f)) = super::cover::covered(mesh, &m) {
+                solids.extend(s.iter().filter_map(|b| transform_box(b, &Mat4::IDENTITY)));
+                out.extend(f.iter().filter_map(|b| transform_box(b, &Mat4::IDENTITY)));
+                continue;
+            }
+        }
         if any_tagged {
             solids.extend(boxes.iter().filter_map(|b| transform_box(b, &m)));
         }
@@ -205,7 +220,11 @@ pub fn occluder_boxes<'a>(
     }
     sort_dedup(&mut out);
     sort_dedup(&mut solids);
-    Occluders { faces: out, solids }
+    Occluders {
+        faces: out,
+        solids,
+        rooms: Vec::new(),
+    }
 }
 
 #[cfg(test)]

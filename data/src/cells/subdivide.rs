@@ -34,13 +34,21 @@ const MAX_DEPTH: usize = 64;
 /// walls are simply portals to nowhere). Courtyards and other outside space inside the box
 /// are cells like any other.
 pub fn subdivide(bounds: &Aabb, occluders: &[Aabb]) -> CellGraph {
-    subdivide_around(bounds, bounds, occluders)
+    subdivide_around(bounds, bounds, occluders, &[])
 }
 
 /// [`subdivide`] with the root `bounds` first cut along the faces of `core` (the model's bulk,
 /// inside `bounds`): the space outside `core` becomes at most six cells, and only `core` is
-/// subdivided further.
-pub fn subdivide_around(bounds: &Aabb, core: &Aabb, occluders: &[Aabb]) -> CellGraph {
+/// subdivided further. `rooms` are the boxes of the rooms the source names (IFC spaces): once
+/// no occluder plane splits a cell, it is split along the faces of the rooms in it, so that
+/// rooms without a wall between them (an open kitchen) still get cells of their own; these
+/// splits are open (they occlude nothing).
+pub fn subdivide_around(
+    bounds: &Aabb,
+    core: &Aabb,
+    occluders: &[Aabb],
+    rooms: &[Aabb],
+) -> CellGraph {
     let root = *bounds;
     let mut graph = CellGraph {
         bounds: root,
@@ -62,7 +70,7 @@ pub fn subdivide_around(bounds: &Aabb, core: &Aabb, occluders: &[Aabb]) -> CellG
         } else if graph.grid_fallback {
             grid_split(&b, core)
         } else if depth < MAX_DEPTH {
-            best_split(&b, &ids, occluders)
+            best_split(&b, &ids, occluders).or_else(|| room_split(&b, rooms))
         } else {
             None
         };
@@ -137,6 +145,44 @@ fn best_split(b: &Aabb, ids: &[u32], occluders: &[Aabb]) -> Option<(usize, f32)>
         })
         .max_by_key(|&(c, bal, axis, bits, _)| (c, bal, std::cmp::Reverse(axis), bits))
         .map(|(_, _, axis, _, at)| (axis, at))
+}
+
+/// Rooms' faces closer than this (metres) to a cell's face do not split it.
+const ROOM_MARGIN: f32 = 0.05;
+
+/// The room face plane covering most of the node's cross section (at least
+/// [`MIN_COVERAGE`]), the most central among equals.
+fn room_split(b: &Aabb, rooms: &[Aabb]) -> Option<(usize, f32)> {
+    let center = b.center();
+    let mut best: Option<((i64, i64), usize, f32)> = None;
+    for r in rooms {
+        if (0..3).any(|a| overlap(r, b, a) <= 0.0) {
+            continue;
+        }
+        for axis in 0..3 {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            let cross = (b.max[u] - b.min[u]) * (b.max[v] - b.min[v]);
+            let cover = overlap(r, b, u) * overlap(r, b, v) / cross.max(1e-9);
+            if cover < MIN_COVERAGE {
+                continue;
+            }
+            for at in [r.min[axis], r.max[axis]] {
+                if at <= b.min[axis] + ROOM_MARGIN || at >= b.max[axis] - ROOM_MARGIN {
+                    continue;
+                }
+                let size = (b.max[axis] - b.min[axis]).max(1e-6);
+                let balance = 1.0 - (at - center[axis]).abs() / size;
+                let key = (
+                    (cover.min(1.0) * 100.0).round() as i64,
+                    (balance * 1000.0) as i64,
+                );
+                if best.is_none_or(|(k, _, _)| key > k) {
+                    best = Some((key, axis, at));
+                }
+            }
+        }
+    }
+    best.map(|(_, axis, at)| (axis, at))
 }
 
 /// The first face of `core` that lies strictly inside `b`, as a split: cuts the space around
@@ -250,7 +296,7 @@ pub(crate) mod tests {
     fn a_far_core_is_cut_out_first_and_subdivided_alone() {
         let walls = faces_of(&[bx([5.0, 0.0, 0.0], [5.2, 3.0, 4.0])]);
         let core = bx([0.0; 3], [10.0, 3.0, 4.0]);
-        let far = subdivide_around(&bx([0.0; 3], [3000.0, 3000.0, 3000.0]), &core, &walls);
+        let far = subdivide_around(&bx([0.0; 3], [3000.0, 3000.0, 3000.0]), &core, &walls, &[]);
         let near = subdivide(&core, &walls);
         // The same cells inside the core, plus one cell per side the root extends past it.
         assert_eq!(far.cells.len(), near.cells.len() + 3);

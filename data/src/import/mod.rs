@@ -1,4 +1,5 @@
-//! Importers: Wavefront OBJ+MTL (`tobj`) and glTF 2.0 / GLB (`gltf`), chosen by file extension.
+//! Importers: Wavefront OBJ+MTL (`tobj`), glTF 2.0 / GLB (`gltf`) and IFC (IFClite), chosen by
+//! file extension.
 //!
 //! Both produce a [`Model`]: definitions shared by instances, vertex colours with the material's
 //! base colour already multiplied in, node tags (`extras`) carried through, coordinates relative
@@ -7,6 +8,7 @@
 //! (mesh, primitive, accessor, node, or OBJ line).
 
 pub mod gltf;
+pub mod ifc;
 pub mod obj;
 
 use crate::error::{DataError, Result};
@@ -28,10 +30,11 @@ pub fn import_file(path: &Path) -> Result<Model> {
     let mut model = match ext.as_str() {
         "obj" => obj::import(path)?,
         "gltf" | "glb" => gltf::import(path)?,
+        "ifc" => ifc::import(path)?,
         other => {
             return Err(DataError::import(
                 path,
-                format!("unsupported model format '.{other}' (expected .obj, .gltf or .glb)"),
+                format!("unsupported model format '.{other}' (expected .obj, .gltf, .glb or .ifc)"),
             ));
         }
     };
@@ -48,6 +51,7 @@ pub fn import_bytes(bytes: &[u8], ext: &str) -> std::result::Result<Model, Strin
     let model = match ext {
         "obj" => obj::import_slice(bytes, None),
         "gltf" | "glb" => gltf::import_slice(bytes, None),
+        "ifc" => ifc::import_slice(bytes),
         other => Err(format!("unsupported model format '.{other}'")),
     }?;
     if model.instances.is_empty() {

@@ -1,0 +1,339 @@
+//! IFC (2x3, 4, 4x3) import through the IFClite stack: `ifc-lite-core` parses the STEP file,
+//! `ifc-lite-geometry` meshes each product's body representation, openings subtracted.
+//!
+//! Every product with a shape (walls, slabs, doors, windows, stairs, furniture, ...) becomes
+//! one definition with one instance, tagged with what the building model knows of it:
+//! `ifc_class` (`IfcWallStandardCase`), `storey` (the `IfcBuildingStorey`'s name), `name` and
+//! `guid`. Walls and slabs are the occluders (`occluder`, as the generator's walls and floors
+//! are): their own data says they are structure, so no size heuristic guesses it. Opening
+//! elements are not drawn (they are the holes), and spaces (`IfcSpace`, the rooms) are not
+//! drawn either: their boxes come back in [`Model::spaces`] for the cell subdivision.
+//!
+//! IFC is Z-up; Portico (like glTF) is Y-up: `(x, y, z)` becomes `(x, z, −y)`. Colours come
+//! from the items' surface styles, else the product's material, else a colour per class;
+//! IFC colours are sRGB and are converted to linear. Coordinates are read in f64 and moved to
+//! the model's local origin ([`crate::bulk::local_origin`]), so georeferenced files keep their
+//! millimetres. A product that does not mesh is skipped with a warning naming it; a file that
+//! does not parse at all is one error naming the file.
+
+mod relations;
+
+use super::mesh_from_streams;
+use crate::bulk::{DBox, bulk, local_origin};
+use crate::error::{DataError, Result};
+use crate::geometry::Aabb;
+use crate::model::{Instance, Material, Model, ObjectDef, Space};
+use glam::{DVec3, Mat4};
+use ifc_lite_core::{EntityDecoder, EntityScanner, has_geometry_by_name};
+use ifc_lite_geometry::GeometryRouter;
+use std::collections::BTreeMap;
+use std::path::Path;
+
+pub use relations::{Relations, Storey};
+
+/// Classes whose products occlude: walls and slabs (floors, roofs, landings).
+const OCCLUDER_CLASSES: [&str; 5] = [
+    "IFCWALL",
+    "IFCWALLSTANDARDCASE",
+    "IFCWALLELEMENTEDCASE",
+    "IFCSLAB",
+    "IFCSLABSTANDARDCASE",
+];
+
+/// Classes with a shape that are not drawn: holes, rooms, and helpers.
+const NOT_DRAWN: [&str; 5] = [
+    "IFCOPENINGELEMENT",
+    "IFCOPENINGSTANDARDCASE",
+    "IFCSPACE",
+    "IFCVIRTUALELEMENT",
+    "IFCANNOTATION",
+];
+
+/// Imports an IFC file.
+pub fn import(path: &Path) -> Result<Model> {
+    let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
+    import_slice(&bytes).map_err(|e| DataError::import(path, e))
+}
+
+/// One product's mesh before the model moves to its local origin: Y-up world positions in
+/// f64, normals, linear colours, indices.
+struct Part {
+    id: u32,
+    class: String,
+    name: String,
+    guid: String,
+    positions: Vec<DVec3>,
+    normals: Vec<[f32; 3]>,
+    colours: Vec<[f32; 4]>,
+    indices: Vec<u32>,
+}
+
+/// Imports IFC bytes (a STEP physical file). The error is one line naming what is wrong.
+pub fn import_slice(bytes: &[u8]) -> Result<Model, String> {
+    if !bytes.starts_with(b"ISO-10303-21") {
+        return Err("not an IFC file: it does not start with ISO-10303-21".into());
+    }
+    let content = String::from_utf8_lossy(bytes);
+    let content: &str = &content;
+    let rel = relations::scan(content);
+    let mut decoder = EntityDecoder::new(content);
+    let router = GeometryRouter::with_units(&content, &mut decoder);
+    let mut products = Vec::new();
+    let mut spaces = Vec::new();
+    let mut scanner = EntityScanner::new(content);
+    while let Some((id, ty, _, _)) = scanner.next_entity() {
+        if ty == "IFCSPACE" {
+            spaces.push(id);
+        } else if has_geometry_by_name(ty) && !NOT_DRAWN.contains(&ty) {
+            products.push((id, ty.to_string()));
+        }
+    }
+    if products.is_empty() {
+        return Err("contains no building elements with a shape".into());
+    }
+    let mut warnings = Vec::new();
+    let mut parts = Vec::new();
+    let mut failed = Vec::new();
+    for (id, ty) in &products {
+        match mesh_product(*id, ty, &router, &mut decoder, &rel) {
+            Ok(Some(p)) => parts.push(p),
+            Ok(None) => {}
+            Err(e) => failed.push(format!("#{id} {ty}: {e}")),
+        }
+    }
+    if !failed.is_empty() {
+        warnings.push(format!(
+            "{} product(s) did not mesh and are left out: {}",
+            failed.len(),
+            failed
+                .iter()
+                .take(5)
+                .cloned()
+                .collect::<Vec<_>>()
+                .join("; ")
+        ));
+    }
+    let boxes: Vec<DBox> = parts
+        .iter()
+        .map(|p| {
+            let mut b = DBox::EMPTY;
+            p.positions.iter().for_each(|q| b.include(*q));
+            b
+        })
+        .collect();
+    let bulk = bulk(&boxes);
+    for &s in &bulk.strays {
+        warnings.push(format!(
+            "#{} {} '{}' lies {:.0} m from the rest of the building: it gets a cell of its own",
+            parts[s].id,
+            parts[s].class,
+            parts[s].name,
+            boxes[s].distance(&bulk.bounds)
+        ));
+    }
+    let origin = local_origin(&bulk.bounds);
+    let mut model = Model {
+        materials: vec![Material::default()],
+        origin: origin.to_array(),
+        ..Model::default()
+    };
+    for p in parts {
+        let positions: Vec<[f32; 3]> = p
+            .positions
+            .iter()
+            .map(|q| (*q - origin).as_vec3().to_array())
+            .collect();
+        let lod = mesh_from_streams(&positions, Some(&p.normals), &p.colours, p.indices)
+            .map_err(|e| format!("#{} {} '{}': {e}", p.id, p.class, p.name))?;
+        let def = model.defs.len() as u32;
+        let label = if p.name.is_empty() {
+            format!("{} #{}", p.class, p.id)
+        } else {
+            p.name.clone()
+        };
+        model.defs.push(ObjectDef {
+            name: label.clone(),
+            lods: vec![lod],
+            material: 0,
+        });
+        let mut tags = BTreeMap::new();
+        tags.insert("ifc_class".to_string(), p.class.clone());
+        tags.insert("guid".to_string(), p.guid);
+        if !p.name.is_empty() {
+            tags.insert("name".to_string(), p.name);
+        }
+        if let Some(s) = rel.storey_of.get(&p.id).and_then(|s| rel.storeys.get(s)) {
+            tags.insert("storey".to_string(), s.name.clone());
+        }
+        model.instances.push(Instance {
+            name: label,
+            def,
+            transform: Mat4::IDENTITY,
+            material: 0,
+            occluder: OCCLUDER_CLASSES.contains(&p.class.to_ascii_uppercase().as_str()),
+            tags,
+        });
+    }
+    for id in spaces {
+        match space_box(id, &router, &mut decoder) {
+            Ok(Some((name, b))) => {
+                let storey = rel
+                    .storey_of
+                    .get(&id)
+                    .and_then(|s| rel.storeys.get(s))
+                    .map(|s| s.name.clone());
+                model.spaces.push(Space {
+                    name,
+                    storey,
+                    bounds: Aabb {
+                        min: (b.min - origin).as_vec3().to_array(),
+                        max: (b.max - origin).as_vec3().to_array(),
+                    },
+                });
+            }
+            Ok(None) => {}
+            Err(e) => warnings.push(format!("space #{id} did not mesh: {e}")),
+        }
+    }
+    model.warnings = warnings;
+    Ok(model)
+}
+
+/// IFC's Z-up to Portico's Y-up.
+fn y_up(x: f64, y: f64, z: f64) -> DVec3 {
+    DVec3::new(x, z, -y)
+}
+
+/// Meshes one product (openings subtracted) into a [`Part`]; `None` when it has no triangles.
+fn mesh_product(
+    id: u32,
+    ty: &str,
+    router: &GeometryRouter,
+    decoder: &mut EntityDecoder,
+    rel: &Relations,
+) -> Result<Option<Part>, String> {
+    let e = decoder.decode_by_id(id).map_err(|e| e.to_string())?;
+    let class = e.ifc_type.name().to_string();
+    let guid = e.get_string(0).unwrap_or_default().to_string();
+    let name = e.get_string(2).unwrap_or_default().trim().to_string();
+    let mut subs = router
+        .process_element_with_submeshes_and_voids(&e, decoder, &rel.voids)
+        .map_err(|e| e.to_string())?;
+    if subs.is_empty() {
+        // Products without styled items come back as one mesh, not as items.
+        let m = router
+            .process_element_with_voids(&e, decoder, &rel.voids)
+            .map_err(|e| e.to_string())?;
+        subs.add(0, m);
+    }
+    let fallback = rel
+        .material_of
+        .get(&id)
+        .and_then(|m| rel.material_colour.get(m))
+        .copied()
+        .unwrap_or_else(|| class_colour(ty));
+    let mut part = Part {
+        id,
+        class,
+        name,
+        guid,
+        positions: Vec::new(),
+        normals: Vec::new(),
+        colours: Vec::new(),
+        indices: Vec::new(),
+    };
+    for sub in subs.iter() {
+        let m = &sub.mesh;
+        let colour = rel
+            .item_colour
+            .get(&sub.geometry_id)
+            .or_else(|| rel.material_colour.get(&sub.geometry_id))
+            .copied()
+            .unwrap_or(fallback);
+        let colour = linear(colour);
+        let base = part.positions.len() as u32;
+        let o = m.origin;
+        for p in m.positions.chunks_exact(3) {
+            part.positions.push(y_up(
+                o[0] + p[0] as f64,
+                o[1] + p[1] as f64,
+                o[2] + p[2] as f64,
+            ));
+        }
+        let count = m.positions.len() / 3;
+        if m.normals.len() == m.positions.len() {
+            for n in m.normals.chunks_exact(3) {
+                part.normals.push([n[0], n[2], -n[1]]);
+            }
+        } else {
+            part.normals.extend(std::iter::repeat_n([0.0; 3], count));
+        }
+        part.colours.extend(std::iter::repeat_n(colour, count));
+        part.indices.extend(m.indices.iter().map(|i| base + i));
+    }
+    Ok((!part.indices.is_empty()).then_some(part))
+}
+
+/// A space's name (`LongName`, else `Name`) and its Y-up world box.
+fn space_box(
+    id: u32,
+    router: &GeometryRouter,
+    decoder: &mut EntityDecoder,
+) -> Result<Option<(String, DBox)>, String> {
+    let e = decoder.decode_by_id(id).map_err(|e| e.to_string())?;
+    let name = e
+        .get_string(7)
+        .filter(|s| !s.trim().is_empty())
+        .or_else(|| e.get_string(2))
+        .unwrap_or_default()
+        .trim()
+        .to_string();
+    let name = if name.is_empty() {
+        format!("#{id}")
+    } else {
+        name
+    };
+    let m = router
+        .process_element(&e, decoder)
+        .map_err(|e| e.to_string())?;
+    let mut b = DBox::EMPTY;
+    let o = m.origin;
+    for p in m.positions.chunks_exact(3) {
+        b.include(y_up(
+            o[0] + p[0] as f64,
+            o[1] + p[1] as f64,
+            o[2] + p[2] as f64,
+        ));
+    }
+    Ok((!b.is_empty()).then_some((name, b)))
+}
+
+/// sRGB (as IFC writes colours) to linear, alpha kept.
+fn linear(c: [f32; 4]) -> [f32; 4] {
+    let f = |x: f32| {
+        if x <= 0.04045 {
+            x / 12.92
+        } else {
+            ((x + 0.055) / 1.055).powf(2.4)
+        }
+    };
+    [f(c[0]), f(c[1]), f(c[2]), c[3]]
+}
+
+/// A colour (sRGB) for a product whose file gives none, by class.
+fn class_colour(ty: &str) -> [f32; 4] {
+    match ty {
+        t if t.starts_with("IFCWALL") => [0.85, 0.83, 0.78, 1.0],
+        t if t.starts_with("IFCSLAB") || t.starts_with("IFCROOF") => [0.6, 0.58, 0.55, 1.0],
+        "IFCDOOR" => [0.55, 0.38, 0.22, 1.0],
+        "IFCWINDOW" => [0.6, 0.75, 0.85, 0.4],
+        t if t.starts_with("IFCSTAIR") || t.starts_with("IFCRAILING") => [0.5, 0.5, 0.52, 1.0],
+        t if t.starts_with("IFCBEAM")
+            || t.starts_with("IFCCOLUMN")
+            || t.starts_with("IFCMEMBER") =>
+        {
+            [0.62, 0.48, 0.32, 1.0]
+        }
+        _ => [0.75, 0.75, 0.75, 1.0],
+    }
+}
