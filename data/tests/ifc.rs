@@ -8,6 +8,7 @@ use portico_data::cells::precompute;
 use portico_data::geometry::Aabb;
 use portico_data::import::{import_bytes, import_file};
 use portico_data::model::Model;
+use portico_data::path::{PathKind, generate};
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
@@ -203,6 +204,33 @@ fn the_cells_are_the_rooms_and_the_doors_join_them() {
         !seen.contains(&named("Doppelbett")),
         "the bath sees the bed"
     );
+
+    // A tour walks: it stays inside the house (through doors and up the stair's hole, never
+    // out of a window), visits every room, and keeps the eye at standing height.
+    let tour = generate(g, PathKind::Tour, 40, 1, 1.4, 1.0).expect("a tour");
+    let house = Aabb {
+        min: [0.0, 0.0, -10.0],
+        max: [12.0, 6.5, 0.0],
+    };
+    for k in &tour.keyframes {
+        assert!(
+            inside(&house, k.eye.into()),
+            "the tour leaves the house at {:?}",
+            k.eye
+        );
+        assert!(
+            k.eye[1] >= 1.5,
+            "the eye at {:?} is below standing height",
+            k.eye
+        );
+    }
+    for s in &m.spaces {
+        let visited = tour
+            .keyframes
+            .iter()
+            .any(|k| inside(&s.bounds, k.eye.into()));
+        assert!(visited, "the tour never enters {}", s.name);
+    }
 }
 
 #[test]

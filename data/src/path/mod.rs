@@ -196,14 +196,89 @@ fn roomy(graph: &CellGraph, c: u32) -> bool {
     s.x >= 1.0 && s.z >= 1.0 && s.y >= 2.0
 }
 
-/// Random rooms joined by their shortest portal chains, through portal centres.
+/// Lowest eye height through an opening (metres above its sill).
+pub const EYE_HEIGHT: f32 = 1.6;
+/// A door: an opening at least this tall (metres)...
+const DOOR_HEIGHT: f32 = 1.8;
+/// ...whose sill is at most this far (metres) above the lower floor of the cells it joins.
+const DOOR_SILL: f32 = 0.35;
+
+/// Whether a person walks through this portal: both its cells inside the building (not
+/// touching the sides of the model's box, where the outside is), and it is a door (an
+/// opening at floor level, tall enough) or a hole in a floor (a stair's).
+pub fn walkable(graph: &CellGraph, portal: u32) -> bool {
+    let p = &graph.portals[portal as usize];
+    let [a, b] = p.cells.map(|c| &graph.cells[c as usize].bounds);
+    let inside = |c: &Aabb| {
+        [0, 2].iter().all(|&k| {
+            c.min[k] > graph.bounds.min[k] + 1e-3 && c.max[k] < graph.bounds.max[k] - 1e-3
+        })
+    };
+    if !inside(a) || !inside(b) {
+        return false;
+    }
+    p.axis == 1
+        || (p.rect.max[1] - p.rect.min[1] >= DOOR_HEIGHT
+            && p.rect.min[1] <= a.min[1].min(b.min[1]) + DOOR_SILL)
+}
+
+/// Random rooms joined by their shortest portal chains. Where the building can be walked
+/// (through doors and stair holes, never out and back in through a window: [`walkable`]), the
+/// tour keeps to the rooms so reached and crosses each door at eye height; otherwise it takes
+/// any chain, through portal centres.
 fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rng) -> Vec<Vec3> {
+    let walk: Vec<bool> = (0..graph.portals.len() as u32)
+        .map(|p| walkable(graph, p))
+        .collect();
+    let inside: Vec<u32> = live
+        .iter()
+        .copied()
+        .filter(|&c| {
+            graph.cells[c as usize]
+                .portals
+                .iter()
+                .any(|&p| walk[p as usize])
+        })
+        .collect();
+    let walking = !inside.is_empty() && {
+        let start = biggest_cell(graph, &inside);
+        let reached = inside
+            .iter()
+            .filter(|&&c| {
+                c == start || portal_chain_by(graph, start, c, |p| walk[p as usize]).is_some()
+            })
+            .count();
+        reached >= 2
+    };
+    let (live, through): (&[u32], &dyn Fn(u32) -> bool) = if walking {
+        (&inside, &|p| walk[p as usize])
+    } else {
+        (live, &|_| true)
+    };
+    let live: Vec<u32> = if walking {
+        let start = biggest_cell(graph, live);
+        live.iter()
+            .copied()
+            .filter(|&c| c == start || portal_chain_by(graph, start, c, through).is_some())
+            .collect()
+    } else {
+        live.to_vec()
+    };
+    // Rooms are visited at eye height above their floor when walking, else at their centre.
+    let stand = |c: u32| {
+        let b = &graph.cells[c as usize].bounds;
+        let mut p = b.center();
+        if walking {
+            p.y = (b.min[1] + EYE_HEIGHT).min(b.max[1] - 0.1).max(b.min[1]);
+        }
+        p
+    };
     // Start in a roomy cell so the first frames see something.
-    let mut at = biggest_cell(graph, live);
-    let mut points = vec![graph.cells[at as usize].bounds.center()];
+    let mut at = biggest_cell(graph, &live);
+    let mut points = vec![stand(at)];
     for _ in 0..legs {
         let target = live[rng.random_range(0..live.len())];
-        let Some(chain) = portal_chain(graph, at, target) else {
+        let Some(chain) = portal_chain_by(graph, at, target, through) else {
             continue;
         };
         // Walk straight through each opening: a point a little before it in the cell left and
@@ -221,11 +296,16 @@ fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rn
             let a = portal.axis as usize;
             let mut n = Vec3::ZERO;
             n[a] = (there.center()[a] - here.center()[a]).signum();
-            let c = portal.rect.center();
+            let mut c = portal.rect.center();
+            if walking && a != 1 {
+                c.y = (portal.rect.min[1] + EYE_HEIGHT)
+                    .min(portal.rect.max[1] - 0.1)
+                    .max(c.y);
+            }
             points.extend([within(here, c - n * 0.4), within(there, c + n * 0.4)]);
             cell = next;
         }
-        points.push(graph.cells[target as usize].bounds.center());
+        points.push(stand(target));
         at = target;
     }
     points
@@ -322,6 +402,16 @@ fn spin(eye: Vec3, turn: f32) -> CameraPath {
 
 /// Portals along a shortest cell path (breadth-first) from `from` to `to`, if connected.
 pub fn portal_chain(graph: &CellGraph, from: u32, to: u32) -> Option<Vec<u32>> {
+    portal_chain_by(graph, from, to, |_| true)
+}
+
+/// [`portal_chain`] through the portals `through` accepts only.
+pub fn portal_chain_by(
+    graph: &CellGraph,
+    from: u32,
+    to: u32,
+    through: impl Fn(u32) -> bool,
+) -> Option<Vec<u32>> {
     let mut came: HashMap<u32, (u32, u32)> = HashMap::new();
     let mut queue = VecDeque::from([from]);
     while let Some(c) = queue.pop_front() {
@@ -337,6 +427,9 @@ pub fn portal_chain(graph: &CellGraph, from: u32, to: u32) -> Option<Vec<u32>> {
             return Some(chain);
         }
         for &p in &graph.cells[c as usize].portals {
+            if !through(p) {
+                continue;
+            }
             let n = graph.portals[p as usize].other(c);
             if n != from && !came.contains_key(&n) {
                 came.insert(n, (c, p));

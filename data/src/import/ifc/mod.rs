@@ -68,8 +68,27 @@ struct Part {
     indices: Vec<u32>,
 }
 
-/// Imports IFC bytes (a STEP physical file). The error is one line naming what is wrong.
+/// Imports IFC bytes (a STEP physical file). The error is one line naming what is wrong. A
+/// panic in the IFC kernel is caught: on one product it costs that product (warned), anywhere
+/// else it is the error.
 pub fn import_slice(bytes: &[u8]) -> Result<Model, String> {
+    std::panic::catch_unwind(|| import_unguarded(bytes)).unwrap_or_else(|p| {
+        Err(format!(
+            "the IFC kernel failed on this file: {}",
+            panic_text(p.as_ref())
+        ))
+    })
+}
+
+/// The message of a caught panic.
+fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
+    p.downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| p.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "panic".into())
+}
+
+fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
     if !bytes.starts_with(b"ISO-10303-21") {
         return Err("not an IFC file: it does not start with ISO-10303-21".into());
     }
@@ -94,12 +113,30 @@ pub fn import_slice(bytes: &[u8]) -> Result<Model, String> {
     let mut warnings = Vec::new();
     let mut parts = Vec::new();
     let mut failed = Vec::new();
+    let mut empty = Vec::new();
     for (id, ty) in &products {
-        match mesh_product(*id, ty, &router, &mut decoder, &rel) {
+        let meshed = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            mesh_product(*id, ty, &router, &mut decoder, &rel)
+        }))
+        .unwrap_or_else(|p| Err(panic_text(p.as_ref())));
+        match meshed {
             Ok(Some(p)) => parts.push(p),
-            Ok(None) => {}
+            Ok(None) => empty.push(format!("#{id} {ty}")),
             Err(e) => failed.push(format!("#{id} {ty}: {e}")),
         }
+    }
+    if parts.is_empty() {
+        return Err(match failed.first() {
+            Some(f) => format!("no product meshed; the first: {f}"),
+            None => format!("no product has triangles ({} have no shape)", empty.len()),
+        });
+    }
+    if !empty.is_empty() {
+        warnings.push(format!(
+            "{} product(s) have no triangles and are left out: {}",
+            empty.len(),
+            empty.iter().take(5).cloned().collect::<Vec<_>>().join(", ")
+        ));
     }
     if !failed.is_empty() {
         warnings.push(format!(
