@@ -49,6 +49,9 @@ const NOT_DRAWN: [&str; 5] = [
     "IFCANNOTATION",
 ];
 
+/// Spatial structure that may or may not have a shape of its own.
+const SPATIAL: [&str; 3] = ["IFCSITE", "IFCBUILDING", "IFCBUILDINGSTOREY"];
+
 /// Imports an IFC file.
 pub fn import(path: &Path) -> Result<Model> {
     let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
@@ -121,6 +124,8 @@ fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
         .unwrap_or_else(|p| Err(panic_text(p.as_ref())));
         match meshed {
             Ok(Some(p)) => parts.push(p),
+            // A site or building without a shape of its own is normal.
+            Ok(None) if SPATIAL.contains(&ty.as_str()) => {}
             Ok(None) => empty.push(format!("#{id} {ty}")),
             Err(e) => failed.push(format!("#{id} {ty}: {e}")),
         }
