@@ -62,8 +62,10 @@ fn close(a: Vec3, b: Vec3, tol: f32) -> bool {
     (a - b).abs().max_element() <= tol
 }
 
-/// The reference: 11 objects, 132 triangles, (0, −0.2, 0)–(10, 3.2, 8) m, 9 cells of which 3
-/// live, 2 portals.
+/// The reference: 11 objects, 132 triangles, (0, −0.2, 0)–(10, 3.2, 8) m, 11 cells of which 3
+/// live, 2 portals. (The case's notes say 9 cells: that was before untagged walls were found by
+/// their shape, which also makes the solid above each of the two doors a dead cell of its own
+/// instead of part of the door's opening; the 3 live cells and 2 portals are the same.)
 fn assert_like_the_house(name: &str, b: &Built, tol: f32) {
     assert_eq!(b.triangles, 132, "{name}: triangles");
     assert_eq!(b.model.instances.len(), 11, "{name}: objects");
@@ -75,7 +77,7 @@ fn assert_like_the_house(name: &str, b: &Built, tol: f32) {
     );
     assert_eq!(
         (b.cells, b.live, b.portals),
-        (9, 3, 2),
+        (11, 3, 2),
         "{name}: cells, live cells, portals"
     );
 }
@@ -262,7 +264,7 @@ fn survey_coordinates_keep_their_millimetres_and_their_offset() {
         "{}",
         wall_thickness(&b.model)
     );
-    assert_eq!((b.cells, b.live, b.portals), (9, 3, 2));
+    assert_eq!((b.cells, b.live, b.portals), (11, 3, 2));
     // The offset is kept in the database, in double precision.
     assert_eq!(b.db.header().origin, origin);
 }

@@ -196,6 +196,20 @@ fn covered_ranges(good: &[u8]) -> Vec<std::ops::Range<u64>> {
     ranges
 }
 
+/// The prologue's padding lies outside its checksum: a flip there is refused too (the property
+/// test below found one that went unnoticed).
+#[test]
+fn a_flip_in_the_prologue_padding_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut v = std::fs::read(built(dir.path(), false)).unwrap();
+    v[PROLOGUE_SIZE - 1] ^= 1;
+    let Err(e) = open_bytes(v) else {
+        panic!("a damaged prologue was accepted")
+    };
+    let e = e.to_string();
+    assert!(e.contains("prologue padding"), "{e}");
+}
+
 /// A flip in the header or in the segment index is caught by its own checksum, named in the
 /// error (not by whatever decoding happens to trip over next).
 #[test]

@@ -432,3 +432,24 @@ fn instance_node<'a>(
         ..NodeJson::default()
     }
 }
+
+/// The same GLB without any node's `extras`: the building as a modelling tool without
+/// Portico's tags would export it (no `occluder`, `kind`, `room` or `storey`), for measuring
+/// how well the cells are found from the geometry alone.
+pub fn without_tags(glb: &[u8]) -> Result<Vec<u8>, GenerateError> {
+    let parsed = gltf::binary::Glb::from_slice(glb)?;
+    let mut root: serde_json::Value = serde_json::from_slice(&parsed.json)?;
+    if let Some(nodes) = root.get_mut("nodes").and_then(|n| n.as_array_mut()) {
+        for n in nodes {
+            if let Some(o) = n.as_object_mut() {
+                o.remove("extras");
+            }
+        }
+    }
+    let out = gltf::binary::Glb {
+        header: parsed.header,
+        json: Cow::Owned(serde_json::to_vec(&root)?),
+        bin: parsed.bin,
+    };
+    Ok(out.to_vec()?)
+}

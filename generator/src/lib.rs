@@ -19,6 +19,8 @@
 mod assemble;
 mod furniture;
 mod glb;
+
+pub use glb::without_tags;
 mod layout;
 mod mesh;
 mod rooms;

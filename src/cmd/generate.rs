@@ -1,4 +1,4 @@
-//! `portico generate --preset tiny|small|soda|mega [--seed N] [--floors F] -o building.glb`
+//! `portico generate --preset tiny|small|soda|mega [--seed N] [--floors F] [--untagged] -o building.glb`
 
 use crate::cmd::values;
 use crate::progress::Bars;
@@ -20,6 +20,10 @@ pub struct Args {
     /// Number of storeys (overrides the preset's).
     #[arg(long)]
     floors: Option<u32>,
+    /// Leave out every node's tags (no `occluder`, `kind`, `room`, `storey` extras), as a
+    /// modelling tool's export would: `build` must then find the walls and slabs itself.
+    #[arg(long)]
+    untagged: bool,
     /// Output GLB file.
     #[arg(
         short = 'o',
@@ -49,12 +53,17 @@ pub fn run(a: Args) -> Result<()> {
     })
     .with_context(|| format!("generating the {} preset", a.preset))?;
     bars.finish();
-    write_atomically(&a.output, &building.glb)?;
+    let glb = if a.untagged {
+        portico_generator::without_tags(&building.glb).context("removing the tags")?
+    } else {
+        building.glb
+    };
+    write_atomically(&a.output, &glb)?;
     let s = &building.stats;
     eprintln!(
         "wrote {} ({:.1} MB) in {:.2} s: {} storeys, {} rooms, {} instances of {} definitions, {} triangles at the highest LOD",
         a.output.display(),
-        building.glb.len() as f64 / 1e6,
+        glb.len() as f64 / 1e6,
         t0.elapsed().as_secs_f64(),
         s.storeys,
         s.rooms,

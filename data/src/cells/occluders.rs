@@ -11,8 +11,9 @@
 //! Tagged walls and slabs that are not written as boxes (BIM exports triangulate walls around
 //! their openings) give what their triangles cover on both faces instead ([`super::cover`]).
 //!
-//! Untagged models (any imported file) get automatic occluders: faces of any instance with both
-//! extents at least [`AUTO_MIN_EXTENT`] — slabs and walls.
+//! Untagged models (any imported file without Portico's tags) get the objects shaped like
+//! walls and slabs as occluders ([`structural`]); a model with none of those gets the faces of
+//! any instance with both extents at least [`AUTO_MIN_EXTENT`].
 //!
 //! Solid volume matters too: the space inside a wall is cut into cells by the planes of other
 //! walls, and those cells must be dead, not joined to each other by "portals" inside the
@@ -177,13 +178,27 @@ pub struct Occluders {
     pub rooms: Vec<Aabb>,
 }
 
+/// Thinnest untagged object taken as a wall (metres): door leaves and panels are thinner.
+pub const MIN_WALL_THICKNESS: f32 = 0.08;
+/// Shortest untagged wall (metres along the floor); walls are at least
+/// [`AUTO_MIN_EXTENT`] high, slabs at least that in both directions.
+pub const MIN_WALL_LENGTH: f32 = 0.5;
+
 /// World occluders for a set of instances, given as (finest mesh in its source triangle order,
-/// transform, tagged). When nothing is tagged, large faces of every instance are used (and no
-/// solids: an untagged box may be furniture, not a wall).
+/// transform, tagged). When nothing is tagged, the walls and slabs are found by their shape
+/// ([`structural`]: thin along one axis, large along the others) and give what their triangles
+/// cover ([`super::cover`]); a model without any such object falls back to the large faces of
+/// every instance (and no solids: an untagged box may be furniture, not a wall).
 pub fn occluder_boxes<'a>(
     instances: impl Iterator<Item = (&'a Mesh, Mat4, bool)> + Clone,
 ) -> Occluders {
     let any_tagged = instances.clone().any(|(_, _, tagged)| tagged);
+    if !any_tagged {
+        let found = structural(instances.clone());
+        if !found.faces.is_empty() {
+            return found;
+        }
+    }
     let mut solids = Vec::new();
     let mut out = Vec::new();
     let mut cache: HashMap<*const Mesh, (Vec<Aabb>, Vec<Aabb>)> = HashMap::new();
@@ -222,6 +237,43 @@ pub fn occluder_boxes<'a>(
     sort_dedup(&mut solids);
     Occluders {
         faces: out,
+        solids,
+        rooms: Vec::new(),
+    }
+}
+
+/// The occluders of an untagged model: every object shaped like a wall (thin horizontally,
+/// at least [`AUTO_MIN_EXTENT`] high and [`MIN_WALL_LENGTH`] long) or a slab (thin vertically,
+/// at least [`AUTO_MIN_EXTENT`] both ways), between [`MIN_WALL_THICKNESS`] and
+/// [`super::cover::MAX_THICKNESS`] thick, with what its triangles cover on both faces.
+/// Furniture, door leaves and glass panes are not walls, so they neither split the cells nor
+/// close the doors.
+pub fn structural<'a>(instances: impl Iterator<Item = (&'a Mesh, Mat4, bool)>) -> Occluders {
+    let mut solids = Vec::new();
+    let mut faces = Vec::new();
+    for (mesh, m, _) in instances {
+        let s = mesh.bounds().transformed(&m).size();
+        let Some(t) = (0..3).min_by(|&a, &b| s[a].total_cmp(&s[b])) else {
+            continue;
+        };
+        let thick = (MIN_WALL_THICKNESS..=super::cover::MAX_THICKNESS).contains(&s[t]);
+        let large = if t == 1 {
+            s.x >= AUTO_MIN_EXTENT && s.z >= AUTO_MIN_EXTENT
+        } else {
+            s.y >= AUTO_MIN_EXTENT && s[2 - t] >= MIN_WALL_LENGTH
+        };
+        if !(thick && large) {
+            continue;
+        }
+        if let Some((sol, f)) = super::cover::covered(mesh, &m) {
+            solids.extend(sol.iter().filter_map(|b| transform_box(b, &Mat4::IDENTITY)));
+            faces.extend(f.iter().filter_map(|b| transform_box(b, &Mat4::IDENTITY)));
+        }
+    }
+    sort_dedup(&mut faces);
+    sort_dedup(&mut solids);
+    Occluders {
+        faces,
         solids,
         rooms: Vec::new(),
     }

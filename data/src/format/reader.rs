@@ -251,6 +251,11 @@ fn read_prologue(path: &Path, map: &[u8]) -> Result<Prologue> {
     if p.prologue_checksum != p.compute_checksum() {
         return Err(DataError::corrupt(path, "prologue checksum mismatch"));
     }
+    // The padding is outside the checksum (which covers the fields), and is written as zeros:
+    // anything else is damage.
+    if p.reserved != [0; 6] {
+        return Err(DataError::corrupt(path, "prologue padding is not zero"));
+    }
     if p.file_len != map.len() as u64 {
         return Err(DataError::Truncated {
             path: path.to_path_buf(),

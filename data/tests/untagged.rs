@@ -1,0 +1,59 @@
+//! A building exported without Portico's tags (no `occluder`, `kind`, `room` extras, as any
+//! modelling tool writes it) must get the cells its tagged export gets: the walls and slabs
+//! are found from their shape (`cells::occluders::structural`).
+
+use portico_data::cells::occluders::occluder_boxes;
+use portico_data::cells::{Precomputed, precompute};
+use portico_data::geometry::Aabb;
+use portico_data::import::import_bytes;
+use portico_generator::{Params, Preset, generate, without_tags};
+
+fn cells_of(glb: &[u8]) -> (Precomputed, usize) {
+    let m = import_bytes(glb, "glb").expect("the generated building imports");
+    let occ = occluder_boxes(
+        m.instances
+            .iter()
+            .map(|i| (&m.defs[i.def as usize].lods[0], i.transform, i.occluder)),
+    );
+    let objects: Vec<Aabb> = m
+        .instances
+        .iter()
+        .map(|i| {
+            m.defs[i.def as usize].lods[0]
+                .bounds()
+                .transformed(&i.transform)
+        })
+        .collect();
+    let p = precompute(&m.bounds(), &occ, &objects, &|_, _| {}, &|| {});
+    let tagged = m.instances.iter().filter(|i| i.occluder).count();
+    (p, tagged)
+}
+
+#[test]
+fn an_untagged_export_gets_the_tagged_buildings_cells_and_culling() {
+    let params = Params {
+        preset: Preset::Small,
+        seed: 3,
+        floors: Some(2),
+    };
+    let glb = generate(&params, &mut |_| {}).unwrap().glb;
+    let bare = without_tags(&glb).unwrap();
+    let (tagged, n_tagged) = cells_of(&glb);
+    let (untagged, n_untagged) = cells_of(&bare);
+    assert!(n_tagged > 0 && n_untagged == 0, "{n_tagged} / {n_untagged}");
+    let (a, b) = (&tagged.stats, &untagged.stats);
+    let near = |x: f64, y: f64| (x - y).abs() <= 0.1 * x.max(y);
+    assert!(
+        near(a.live_cells as f64, b.live_cells as f64),
+        "live cells: tagged {}, untagged {}",
+        a.live_cells,
+        b.live_cells
+    );
+    assert!(
+        near(a.objects_visible.0, b.objects_visible.0),
+        "objects visible per cell: tagged {:?}, untagged {:?}",
+        a.objects_visible,
+        b.objects_visible
+    );
+    assert!(!b.grid_fallback);
+}
