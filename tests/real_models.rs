@@ -179,3 +179,99 @@ fn the_ifc_house_builds_with_its_rooms_as_cells_verifies_and_walks() {
     assert_eq!(verify["false_negatives"], 0, "{verify}");
     assert_seen("AC14-FZK-Haus.ifc", &walk_model(&m));
 }
+
+/// A frame from the middle of each room of the IFC house, at eye height, looking along the
+/// room, shows that room: drawn with every object, it is nearly the same picture as drawn with
+/// only the objects touching the room (its walls, floor, ceiling, furniture, doors, windows).
+/// A frame from inside a wall, from the outside, or of the wrong storey would not be.
+#[test]
+fn a_frame_in_each_room_of_the_ifc_house_shows_that_room() {
+    use portico_render::{Camera, Draw, Renderer};
+    let Some(m) = corpus("IFC/AC14-FZK-Haus.ifc") else {
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    let db = dir.path().join("haus.portico");
+    portico(&[
+        "build",
+        m.to_str().unwrap(),
+        "-o",
+        db.to_str().unwrap(),
+        "--no-hierarchy",
+        "--no-cells",
+    ]);
+    let spaces = portico_data::import::import_file(&m).unwrap().spaces;
+    assert_eq!(spaces.len(), 7);
+    let db = portico_data::Database::open(&db).unwrap();
+    let h = db.header();
+    let (w, hgt) = (160, 120);
+    let mut r = Renderer::new(w, hgt).unwrap();
+    r.set_clear(portico_render::wgpu::Color {
+        r: 1.0,
+        g: 0.0,
+        b: 1.0,
+        a: 1.0,
+    });
+    let meshes: Vec<_> = h
+        .instances
+        .iter()
+        .map(|i| r.upload(&db.geometry(&h.lods_of(i)[0]).unwrap()).unwrap())
+        .collect();
+    for s in &spaces {
+        let b = &s.bounds;
+        let size = b.size();
+        // Touching the room: within a wall's thickness of its box (windows and doors sit in
+        // the middle of their walls).
+        let touches = |o: &portico_data::geometry::Aabb| {
+            (0..3).all(|k| o.min[k] <= b.max[k] + 0.4 && o.max[k] >= b.min[k] - 0.4)
+        };
+        let draws = |only_room: bool| -> Vec<Draw> {
+            h.instances
+                .iter()
+                .zip(&meshes)
+                .filter(|(i, _)| !only_room || touches(&i.bounds))
+                .map(|(i, mesh)| Draw {
+                    mesh,
+                    transform: glam::Mat4::from_cols_array(&i.transform),
+                    color: [1.0; 4],
+                })
+                .collect()
+        };
+        let mut eye = b.center();
+        eye.y = b.min[1] + 1.6;
+        let look = if size.x >= size.z {
+            glam::Vec3::X
+        } else {
+            glam::Vec3::NEG_Z
+        };
+        let camera = Camera {
+            eye,
+            target: eye + look,
+            up: glam::Vec3::Y,
+            fovy: 1.0,
+            near: 0.05,
+            far: 100.0,
+        };
+        let all = r.render_to_image(&camera, &draws(false)).unwrap().1;
+        let room = r.render_to_image(&camera, &draws(true)).unwrap().1;
+        let same = all
+            .pixels()
+            .zip(room.pixels())
+            .filter(|(a, b)| (0..3).all(|k| a[k].abs_diff(b[k]) <= 8))
+            .count() as f64
+            / f64::from(w * hgt);
+        assert!(
+            same >= 0.8,
+            "{}: only {:.0} % of the frame is the room",
+            s.name,
+            same * 100.0
+        );
+        // And the room is seen, not the background (cleared to magenta): most pixels are drawn.
+        let drawn = all
+            .pixels()
+            .filter(|p| p[0] < 250 || p[1] > 5 || p[2] < 250)
+            .count() as f64
+            / f64::from(w * hgt);
+        assert!(drawn >= 0.5, "{}: {:.0} % drawn", s.name, drawn * 100.0);
+    }
+}

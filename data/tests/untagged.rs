@@ -2,7 +2,10 @@
 //! modelling tool writes it) must get the cells its tagged export gets: the walls and slabs
 //! are found from their shape (`cells::occluders::structural`).
 
+use glam::Vec3;
 use portico_data::cells::occluders::occluder_boxes;
+use portico_data::cells::sight::Triangles;
+use portico_data::cells::verify::verify_against_triangles;
 use portico_data::cells::{Precomputed, precompute};
 use portico_data::geometry::Aabb;
 use portico_data::import::import_bytes;
@@ -56,4 +59,38 @@ fn an_untagged_export_gets_the_tagged_buildings_cells_and_culling() {
         b.objects_visible
     );
     assert!(!b.grid_fallback);
+    // And nothing visible is culled: rays against the objects' own triangles.
+    let m = import_bytes(&bare, "glb").unwrap();
+    let triangles: Vec<Vec<[Vec3; 3]>> = m
+        .instances
+        .iter()
+        .map(|i| {
+            let mesh = &m.defs[i.def as usize].lods[0];
+            mesh.indices
+                .chunks_exact(3)
+                .map(|t| {
+                    t.iter()
+                        .map(|&k| {
+                            i.transform
+                                .transform_point3(Vec3::from(mesh.vertices[k as usize].position))
+                        })
+                        .collect::<Vec<_>>()
+                        .try_into()
+                        .unwrap()
+                })
+                .collect()
+        })
+        .collect();
+    let bounds: Vec<Aabb> = m
+        .instances
+        .iter()
+        .map(|i| {
+            m.defs[i.def as usize].lods[0]
+                .bounds()
+                .transformed(&i.transform)
+        })
+        .collect();
+    let scene = Triangles::new(bounds, triangles);
+    let report = verify_against_triangles(&untagged.graph, &untagged.stabs, &scene, 20_000, 1);
+    assert_eq!(report.false_negatives, 0, "{report:?}");
 }

@@ -6,7 +6,7 @@ use glam::Vec3;
 use portico_data::Database;
 use portico_data::cells::CellGraph;
 use portico_data::cells::realtime::{Frustum, compare_culling};
-use portico_data::path::portal_chain;
+use portico_data::path::{PathKind, generate};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::path::PathBuf;
@@ -22,8 +22,8 @@ pub struct Args {
     /// Random seed.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Instead of random views, walk a tour: this many legs between random live cells, each
-    /// along the chain of portals joining them, one view every half metre, looking ahead.
+    /// Instead of random views, walk the standard tour (`portico path --kind tour`) of this
+    /// many legs, one view every half metre, looking where the tour looks.
     #[arg(long)]
     tour: Option<usize>,
     /// Horizontal field of view in degrees.
@@ -57,7 +57,7 @@ pub fn run(a: Args) -> Result<()> {
     let mut rng = ChaCha8Rng::seed_from_u64(a.seed);
     let half_x = (a.fov * 0.5).to_radians();
     let views: Vec<Frustum> = match a.tour {
-        Some(legs) => tour(&graph, &live, legs, &mut rng)
+        Some(legs) => tour(&graph, legs, a.seed)
             .into_iter()
             .map(|(eye, dir)| Frustum::new(eye, dir, Vec3::Y, half_x, half_x * 0.75))
             .collect(),
@@ -110,33 +110,19 @@ fn random_views(
         .collect()
 }
 
-/// A walk through the building: `legs` shortest cell paths (breadth-first over portals)
-/// between random live cells, through portal centres, sampled every half metre, each view
-/// looking along the (horizontal) direction of travel.
-fn tour(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rng) -> Vec<(Vec3, Vec3)> {
-    let mut at = live[rng.random_range(0..live.len())];
-    let mut points = vec![graph.cells[at as usize].bounds.center()];
-    for _ in 0..legs {
-        let target = live[rng.random_range(0..live.len())];
-        let Some(chain) = portal_chain(graph, at, target) else {
-            continue;
-        };
-        for p in chain {
-            points.push(graph.portals[p as usize].rect.center());
-        }
-        points.push(graph.cells[target as usize].bounds.center());
-        at = target;
-    }
+/// A walk through the building: the standard tour of `legs` legs (`portico path --kind tour`:
+/// through doors and stair holes at eye height where the building can be walked), one view
+/// every half metre along it, each looking where the tour looks.
+fn tour(graph: &CellGraph, legs: usize, seed: u64) -> Vec<(Vec3, Vec3)> {
+    let Some(path) = generate(graph, PathKind::Tour, legs, seed, 1.4, 1.0) else {
+        return Vec::new();
+    };
     let mut views = Vec::new();
-    let mut dir = Vec3::X;
-    for w in points.windows(2) {
-        let step = w[1] - w[0];
-        let flat = Vec3::new(step.x, 0.0, step.z);
-        if flat.length() > 1e-3 {
-            dir = flat.normalize();
-        }
-        let n = (step.length() / 0.5).ceil().max(1.0) as usize;
-        views.extend((0..n).map(|i| (w[0] + step * (i as f32 / n as f32), dir)));
+    for w in path.keyframes.windows(2) {
+        let (a, b) = (Vec3::from(w[0].eye), Vec3::from(w[1].eye));
+        let n = ((b - a).length() / 0.5).ceil().max(1.0) as usize;
+        let dir = Vec3::from(w[1].dir);
+        views.extend((0..n).map(|i| (a.lerp(b, i as f32 / n as f32), dir)));
     }
     views
 }

@@ -9,8 +9,12 @@
 //! windows come out exactly) plus at most [`EXTRA_LINES`] even lines (so sloped edges come
 //! out as a staircase inside them); a grid cell is solid when its corners and centre are
 //! covered by the triangles lying in both of the object's two faces. The solid cells, merged
-//! into rectangles, become solid boxes, and their outline becomes occluder faces. Everything
-//! is conservative: a cell counts only when covered on both faces, so a hole is never closed.
+//! into rectangles, become solid boxes, and their outline becomes occluder faces. A cell an
+//! edge of a face's outline passes through is open (a slanted or small opening may miss every
+//! sample point), and an object whose sides do not close its outline (a table with a shelf, a
+//! double skin open at its ends) is not solid and gives nothing. Very fine objects (more than
+//! [`MAX_GRID_CELLS`] cells or [`MAX_TRIANGLES`] triangles) give nothing either: fewer
+//! occluders only cost culling, never a wrong answer.
 
 use crate::geometry::{Aabb, Mesh};
 use glam::{Mat4, Vec2, Vec3};
@@ -21,6 +25,11 @@ pub const MAX_THICKNESS: f32 = 1.0;
 pub const MIN_SPAN: f32 = 0.5;
 /// Even grid lines added along each long axis, besides the vertex coordinates.
 pub const EXTRA_LINES: usize = 16;
+/// Most grid cells (along both long axes together) worked through for one object; a finer
+/// object is not used as an occluder (fewer occluders only cost culling).
+pub const MAX_GRID_CELLS: usize = 1 << 20;
+/// Most triangles in one object taken as a wall or slab.
+pub const MAX_TRIANGLES: usize = 200_000;
 /// How far (metres) a triangle may lie from a face's plane and still be on it.
 const PLANE_TOLERANCE: f32 = 2e-3;
 /// Slack (in barycentric terms) for points on a triangle's edge.
@@ -52,7 +61,29 @@ pub fn covered(mesh: &Mesh, m: &Mat4) -> Option<(Vec<Aabb>, Vec<Aabb>)> {
             }
         }
     }
-    if on.iter().any(Vec::is_empty) {
+    if on.iter().any(Vec::is_empty) || mesh.indices.len() / 3 > MAX_TRIANGLES {
+        return None;
+    }
+    // Closed all round: the sides (triangles facing sideways; mitred ends are slanted) must
+    // add up to the outline of a face times the thickness, or the space between the faces is not solid (a
+    // table with a shelf under it, a double skin open at its ends).
+    let edges = [boundary(&on[0]), boundary(&on[1])];
+    let outline: f32 = edges[0].iter().map(|(a, b)| a.distance(*b)).sum();
+    let sides: f32 = mesh
+        .indices
+        .chunks_exact(3)
+        .map(|tri| {
+            let p = [tri[0], tri[1], tri[2]].map(|i| pts[i as usize]);
+            // Facing sideways (mitred ends up to about 48°), not like the faces.
+            let n = (p[1] - p[0]).cross(p[2] - p[0]);
+            if n[t].abs() <= 0.75 * n.length() {
+                0.5 * n.length()
+            } else {
+                0.0
+            }
+        })
+        .sum();
+    if sides < 0.9 * outline * (hi - lo) {
         return None;
     }
     let lines = |axis: usize, pick: fn(Vec2) -> f32| {
@@ -67,9 +98,17 @@ pub fn covered(mesh: &Mesh, m: &Mat4) -> Option<(Vec<Aabb>, Vec<Aabb>)> {
         u: lines(u, |q| q.x),
         v: lines(v, |q| q.y),
     };
+    let (nu, nv) = grid.cells();
+    if nu * nv > MAX_GRID_CELLS {
+        return None;
+    }
     let solid: Vec<bool> = {
-        let a = grid.cover(&on[0]);
-        let c = grid.cover(&on[1]);
+        let mut a = grid.cover(&on[0]);
+        let mut c = grid.cover(&on[1]);
+        // A cell an edge of a face's outline passes through is partly open, whatever its
+        // sample points say (a slanted or small opening can miss all five).
+        grid.cut(&mut a, &edges[0]);
+        grid.cut(&mut c, &edges[1]);
         a.iter().zip(&c).map(|(x, y)| *x && *y).collect()
     };
     let to_box = |u0: f32, u1: f32, v0: f32, v1: f32, t0: f32, t1: f32| {
@@ -164,6 +203,29 @@ impl Grid {
         out
     }
 
+    /// Marks not covered every cell whose interior one of `edges` passes through.
+    fn cut(&self, covered: &mut [bool], edges: &[(Vec2, Vec2)]) {
+        let nu = self.u.len() - 1;
+        for &(a, b) in edges {
+            let (lo, hi) = (a.min(b), a.max(b));
+            let i0 = self.u.partition_point(|&x| x <= lo.x).saturating_sub(1);
+            let i1 = self.u.partition_point(|&x| x < hi.x).min(nu);
+            let j0 = self.v.partition_point(|&y| y <= lo.y).saturating_sub(1);
+            let j1 = self.v.partition_point(|&y| y < hi.y).min(self.v.len() - 1);
+            for j in j0..j1 {
+                for i in i0..i1 {
+                    let (clo, chi) = (
+                        Vec2::new(self.u[i], self.v[j]),
+                        Vec2::new(self.u[i + 1], self.v[j + 1]),
+                    );
+                    if covered[j * nu + i] && crosses_open(a, b, clo, chi) {
+                        covered[j * nu + i] = false;
+                    }
+                }
+            }
+        }
+    }
+
     /// Solid cells merged into rectangles `(i0, i1, j0, j1)` of grid line indices: runs along
     /// `u`, stacked along `v` while the run repeats.
     fn rectangles(&self, solid: &[bool]) -> Vec<(usize, usize, usize, usize)> {
@@ -249,6 +311,71 @@ impl Grid {
     }
 }
 
+/// The edges of a face's outline, openings included: the edges only one of its triangles has
+/// (endpoints matched to 0.1 mm).
+fn boundary(tris: &[[Vec2; 3]]) -> Vec<(Vec2, Vec2)> {
+    let key = |p: Vec2| ((p.x * 1e4).round() as i64, (p.y * 1e4).round() as i64);
+    /// An edge by its endpoints on a 0.1 mm grid, the lower first.
+    type EdgeKey = ((i64, i64), (i64, i64));
+    let mut count: std::collections::HashMap<EdgeKey, (u32, Vec2, Vec2)> =
+        std::collections::HashMap::new();
+    for t in tris {
+        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+            let (ka, kb) = (key(a), key(b));
+            if ka == kb {
+                continue;
+            }
+            let k = if ka < kb { (ka, kb) } else { (kb, ka) };
+            count.entry(k).or_insert((0, a, b)).0 += 1;
+        }
+    }
+    let mut out: Vec<(Vec2, Vec2)> = count
+        .into_values()
+        .filter(|(n, _, _)| *n == 1)
+        .map(|(_, a, b)| (a, b))
+        .collect();
+    out.sort_by(|x, y| {
+        [x.0.x, x.0.y, x.1.x, x.1.y]
+            .iter()
+            .zip([y.0.x, y.0.y, y.1.x, y.1.y].iter())
+            .map(|(p, q)| p.total_cmp(q))
+            .find(|o| o.is_ne())
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    out
+}
+
+/// Whether the segment `a`–`b` passes through the open rectangle `lo`–`hi` (Liang–Barsky).
+fn crosses_open(a: Vec2, b: Vec2, lo: Vec2, hi: Vec2) -> bool {
+    let e = 1e-5;
+    let (lo, hi) = (lo + Vec2::splat(e), hi - Vec2::splat(e));
+    if lo.x >= hi.x || lo.y >= hi.y {
+        return false;
+    }
+    let d = b - a;
+    let (mut t0, mut t1) = (0.0f32, 1.0f32);
+    for (p, q) in [
+        (-d.x, a.x - lo.x),
+        (d.x, hi.x - a.x),
+        (-d.y, a.y - lo.y),
+        (d.y, hi.y - a.y),
+    ] {
+        if p == 0.0 {
+            if q <= 0.0 {
+                return false;
+            }
+        } else {
+            let r = q / p;
+            if p < 0.0 {
+                t0 = t0.max(r);
+            } else {
+                t1 = t1.min(r);
+            }
+        }
+    }
+    t0 < t1
+}
+
 /// Whether `p` lies in triangle `t` (its edges included).
 fn in_triangle(p: Vec2, t: &[Vec2; 3]) -> bool {
     let d = (t[1] - t[0]).perp_dot(t[2] - t[0]);
@@ -299,6 +426,11 @@ mod tests {
                 indices.extend([base + k.0, base + k.1, base + k.2]);
             }
         }
+        // The sides: a quad along each edge of the outline, from one face to the other.
+        for i in 0..8u32 {
+            let j = (i + 1) % 8;
+            indices.extend([i, j, 8 + j, i, 8 + j, 8 + i]);
+        }
         Mesh { vertices, indices }
     }
 
@@ -327,12 +459,118 @@ mod tests {
     }
 
     #[test]
+    fn a_table_with_a_shelf_is_not_solid_between_its_boards() {
+        // A 2 m × 2 m top at 0.75 m and a shelf at 0.1 m, open all round: both "faces" are
+        // covered, the sides are not.
+        let board = |y0: f32, y1: f32| {
+            crate::lod::box_mesh(
+                &Aabb {
+                    min: [0.0, y0, 0.0],
+                    max: [2.0, y1, 2.0],
+                },
+                [1.0; 4],
+            )
+        };
+        let table = crate::import::concat(vec![board(0.1, 0.12), board(0.73, 0.75)]);
+        assert!(covered(&table, &Mat4::IDENTITY).is_none());
+        // A closed slab of the same size is solid.
+        let slab = board(0.1, 0.75);
+        let (solids, _) = covered(&slab, &Mat4::IDENTITY).unwrap();
+        assert_eq!(solids.len(), 1);
+    }
+
+    /// Convex outlines (in x, y) extruded from z = 0 to 0.2, each a closed prism.
+    fn prisms(outlines: &[&[[f32; 2]]]) -> Mesh {
+        let mut vertices = Vec::new();
+        let mut indices = Vec::new();
+        for o in outlines {
+            let n = o.len() as u32;
+            let base = vertices.len() as u32;
+            for z in [0.0f32, 0.2] {
+                for [x, y] in o.iter() {
+                    vertices.push(Vertex::new([*x, *y, z], [0.0, 0.0, 1.0], [1.0; 4]));
+                }
+            }
+            for i in 1..n - 1 {
+                indices.extend([base, base + i, base + i + 1]);
+                indices.extend([base + n, base + n + i, base + n + i + 1]);
+            }
+            for i in 0..n {
+                let j = (i + 1) % n;
+                indices.extend([
+                    base + i,
+                    base + j,
+                    base + n + j,
+                    base + i,
+                    base + n + j,
+                    base + n + i,
+                ]);
+            }
+        }
+        Mesh { vertices, indices }
+    }
+
+    #[test]
+    fn a_small_triangular_vent_stays_open() {
+        // A 10 m × 3 m wall with a vent (4.4, 2.07), (4.65, 2.24), (4.9, 2.07), written as
+        // convex pieces around it. Every sample point of the grid cells inside the vent lies on
+        // its outline (which counts as covered): only the outline's crossing opens them.
+        let wall = prisms(&[
+            &[[0.0, 0.0], [4.4, 0.0], [4.4, 3.0], [0.0, 3.0]],
+            &[[4.9, 0.0], [10.0, 0.0], [10.0, 3.0], [4.9, 3.0]],
+            &[[4.4, 0.0], [4.9, 0.0], [4.9, 2.07], [4.4, 2.07]],
+            &[[4.4, 2.07], [4.65, 2.24], [4.65, 3.0], [4.4, 3.0]],
+            &[[4.65, 2.24], [4.9, 2.07], [4.9, 3.0], [4.65, 3.0]],
+        ]);
+        let (solids, _) = covered(&wall, &Mat4::IDENTITY).unwrap();
+        assert!(!solids.is_empty());
+        for p in [[4.65, 2.15], [4.5, 2.1], [4.8, 2.1], [4.65, 2.22]] {
+            let p = Vec3::new(p[0], p[1], 0.1);
+            let blocked = solids
+                .iter()
+                .any(|b| (0..3).all(|a| b.min[a] < p[a] && p[a] < b.max[a]));
+            assert!(!blocked, "the vent is closed at {p}");
+        }
+    }
+
+    #[test]
+    fn a_segment_crosses_a_cell_only_through_its_interior() {
+        let (lo, hi) = (Vec2::ZERO, Vec2::ONE);
+        assert!(crosses_open(
+            Vec2::new(-1.0, 0.2),
+            Vec2::new(2.0, 0.9),
+            lo,
+            hi
+        ));
+        // Along an edge, or touching a corner: not through the interior.
+        assert!(!crosses_open(
+            Vec2::new(0.0, -1.0),
+            Vec2::new(0.0, 2.0),
+            lo,
+            hi
+        ));
+        assert!(!crosses_open(
+            Vec2::new(-1.0, 1.0),
+            Vec2::new(1.0, 3.0),
+            lo,
+            hi
+        ));
+        assert!(!crosses_open(
+            Vec2::new(2.0, 2.0),
+            Vec2::new(3.0, 0.5),
+            lo,
+            hi
+        ));
+    }
+
+    #[test]
     fn a_hole_in_one_face_only_is_not_closed_and_thick_objects_are_refused() {
         let mut m = wall_with_door();
         // Drop the back face's triangles left of the door: that part is open on one side.
         m.indices.drain(18..24);
-        let (solids, _) = covered(&m, &Mat4::IDENTITY).unwrap();
-        let area: f32 = solids.iter().map(|b| b.size().x * b.size().y).sum();
+        let area: f32 = covered(&m, &Mat4::IDENTITY).map_or(0.0, |(solids, _)| {
+            solids.iter().map(|b| b.size().x * b.size().y).sum()
+        });
         assert!(area < 10.0 - 1.0, "solid area {area}");
         let thick = Mat4::from_scale(Vec3::new(1.0, 1.0, 10.0));
         assert!(covered(&wall_with_door(), &thick).is_none());

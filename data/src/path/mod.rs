@@ -200,8 +200,11 @@ fn roomy(graph: &CellGraph, c: u32) -> bool {
 pub const EYE_HEIGHT: f32 = 1.6;
 /// A door: an opening at least this tall (metres)...
 const DOOR_HEIGHT: f32 = 1.8;
-/// ...whose sill is at most this far (metres) above the lower floor of the cells it joins.
+/// ...whose sill is at most this far (metres) above the lower floor of the cells it joins...
 const DOOR_SILL: f32 = 0.35;
+/// ...and at least this wide (metres); holes in floors too, both ways. Narrower gaps (between
+/// wall segments of an export) are not walked through.
+const DOOR_WIDTH: f32 = 0.5;
 
 /// Whether a person walks through this portal: both its cells inside the building (not
 /// touching the sides of the model's box, where the outside is), and it is a door (an
@@ -217,9 +220,14 @@ pub fn walkable(graph: &CellGraph, portal: u32) -> bool {
     if !inside(a) || !inside(b) {
         return false;
     }
-    p.axis == 1
-        || (p.rect.max[1] - p.rect.min[1] >= DOOR_HEIGHT
-            && p.rect.min[1] <= a.min[1].min(b.min[1]) + DOOR_SILL)
+    let size = p.rect.size();
+    if p.axis == 1 {
+        return size.x >= DOOR_WIDTH && size.z >= DOOR_WIDTH;
+    }
+    let width = if p.axis == 0 { size.z } else { size.x };
+    width >= DOOR_WIDTH
+        && size.y >= DOOR_HEIGHT
+        && p.rect.min[1] <= a.min[1].min(b.min[1]) + DOOR_SILL
 }
 
 /// Random rooms joined by their shortest portal chains. Where the building can be walked
@@ -230,39 +238,41 @@ fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rn
     let walk: Vec<bool> = (0..graph.portals.len() as u32)
         .map(|p| walkable(graph, p))
         .collect();
-    let inside: Vec<u32> = live
-        .iter()
-        .copied()
-        .filter(|&c| {
-            graph.cells[c as usize]
-                .portals
-                .iter()
-                .any(|&p| walk[p as usize])
-        })
-        .collect();
-    let walking = !inside.is_empty() && {
-        let start = biggest_cell(graph, &inside);
-        let reached = inside
-            .iter()
-            .filter(|&&c| {
-                c == start || portal_chain_by(graph, start, c, |p| walk[p as usize]).is_some()
-            })
-            .count();
-        reached >= 2
-    };
-    let (live, through): (&[u32], &dyn Fn(u32) -> bool) = if walking {
-        (&inside, &|p| walk[p as usize])
+    // The walkable part of the building: the largest set of rooms joined through walkable
+    // portals (one flood fill over them).
+    let mut is_live = vec![false; graph.cells.len()];
+    live.iter().for_each(|&c| is_live[c as usize] = true);
+    let mut seen = vec![false; graph.cells.len()];
+    let mut rooms: Vec<u32> = Vec::new();
+    for &start in live {
+        if seen[start as usize] {
+            continue;
+        }
+        let mut stack = vec![start];
+        seen[start as usize] = true;
+        let mut members = Vec::new();
+        while let Some(c) = stack.pop() {
+            if is_live[c as usize] {
+                members.push(c);
+            }
+            for &p in &graph.cells[c as usize].portals {
+                let n = graph.portals[p as usize].other(c);
+                if walk[p as usize] && !seen[n as usize] {
+                    seen[n as usize] = true;
+                    stack.push(n);
+                }
+            }
+        }
+        if members.len() > rooms.len() {
+            rooms = members;
+        }
+    }
+    rooms.sort_unstable();
+    let walking = rooms.len() >= 2;
+    let (live, through): (Vec<u32>, &dyn Fn(u32) -> bool) = if walking {
+        (rooms, &|p| walk[p as usize])
     } else {
-        (live, &|_| true)
-    };
-    let live: Vec<u32> = if walking {
-        let start = biggest_cell(graph, live);
-        live.iter()
-            .copied()
-            .filter(|&c| c == start || portal_chain_by(graph, start, c, through).is_some())
-            .collect()
-    } else {
-        live.to_vec()
+        (live.to_vec(), &|_| true)
     };
     // Rooms are visited at eye height above their floor when walking, else at their centre.
     let stand = |c: u32| {
@@ -296,13 +306,20 @@ fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rn
             let a = portal.axis as usize;
             let mut n = Vec3::ZERO;
             n[a] = (there.center()[a] - here.center()[a]).signum();
-            let mut c = portal.rect.center();
-            if walking && a != 1 {
-                c.y = (portal.rect.min[1] + EYE_HEIGHT)
+            let c = portal.rect.center();
+            let (mut before, mut after) = (within(here, c - n * 0.4), within(there, c + n * 0.4));
+            if walking && a == 1 {
+                // Up or down a stair's hole: standing on each side's floor.
+                before.y = stand(cell).y.clamp(here.min[1], here.max[1]);
+                after.y = stand(next).y.clamp(there.min[1], there.max[1]);
+            } else if walking {
+                let y = (portal.rect.min[1] + EYE_HEIGHT)
                     .min(portal.rect.max[1] - 0.1)
-                    .max(c.y);
+                    .max(portal.rect.min[1]);
+                before.y = y.clamp(here.min[1], here.max[1]);
+                after.y = y.clamp(there.min[1], there.max[1]);
             }
-            points.extend([within(here, c - n * 0.4), within(there, c + n * 0.4)]);
+            points.extend([before, after]);
             cell = next;
         }
         points.push(stand(target));

@@ -19,7 +19,7 @@
 mod relations;
 
 use super::mesh_from_streams;
-use crate::bulk::{DBox, bulk, local_origin};
+use crate::bulk::{DBox, MAX_COORDINATE, bulk, local_origin};
 use crate::error::{DataError, Result};
 use crate::geometry::Aabb;
 use crate::model::{Instance, Material, Model, ObjectDef, Space};
@@ -40,11 +40,15 @@ const OCCLUDER_CLASSES: [&str; 5] = [
     "IFCSLABSTANDARDCASE",
 ];
 
-/// Classes with a shape that are not drawn: holes, rooms, and helpers.
-const NOT_DRAWN: [&str; 5] = [
+/// Classes with a shape that are not drawn: holes (and what cuts them), rooms, zones and
+/// helpers.
+const NOT_DRAWN: [&str; 8] = [
     "IFCOPENINGELEMENT",
     "IFCOPENINGSTANDARDCASE",
+    "IFCVOIDINGFEATURE",
+    "IFCEARTHWORKSCUT",
     "IFCSPACE",
+    "IFCSPATIALZONE",
     "IFCVIRTUALELEMENT",
     "IFCANNOTATION",
 ];
@@ -104,10 +108,11 @@ fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
     let mut spaces = Vec::new();
     let mut scanner = EntityScanner::new(content);
     while let Some((id, ty, _, _)) = scanner.next_entity() {
+        let ty = ty.to_ascii_uppercase();
         if ty == "IFCSPACE" {
             spaces.push(id);
-        } else if has_geometry_by_name(ty) && !NOT_DRAWN.contains(&ty) {
-            products.push((id, ty.to_string()));
+        } else if has_geometry_by_name(&ty) && !NOT_DRAWN.contains(&ty.as_str()) {
+            products.push((id, ty));
         }
     }
     if products.is_empty() {
@@ -312,6 +317,15 @@ fn mesh_product(
         }
         part.colours.extend(std::iter::repeat_n(colour, count));
         part.indices.extend(m.indices.iter().map(|i| base + i));
+    }
+    if part
+        .positions
+        .iter()
+        .any(|p| !p.is_finite() || p.abs().max_element() > MAX_COORDINATE)
+    {
+        return Err(format!(
+            "a vertex is not a finite number or lies beyond ±{MAX_COORDINATE:.0e} m"
+        ));
     }
     Ok((!part.indices.is_empty()).then_some(part))
 }

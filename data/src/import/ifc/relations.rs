@@ -41,6 +41,7 @@ pub fn scan(content: &str) -> Relations {
     let mut contained: Vec<(u32, Vec<u32>)> = Vec::new();
     let mut material_reps: Vec<(u32, Vec<u32>)> = Vec::new();
     let mut associations: Vec<(u32, Vec<u32>)> = Vec::new();
+    let mut memo = StyleMemo::default();
     while let Some((id, ty, start, end)) = scanner.next_entity() {
         let wanted = matches!(
             ty,
@@ -84,7 +85,7 @@ pub fn scan(content: &str) -> Relations {
             }
             "IFCSTYLEDITEM" => {
                 if let (Some(item), Some(styles)) = (e.get_ref(0), e.get(1))
-                    && let Some(c) = colour_of_styles(styles, &mut decoder)
+                    && let Some(c) = colour_of_styles(styles, &mut decoder, &mut memo)
                 {
                     rel.item_colour.entry(item).or_insert(c);
                 }
@@ -123,10 +124,13 @@ pub fn scan(content: &str) -> Relations {
     for (material, reps) in material_reps {
         let colour = reps.iter().find_map(|&r| {
             let rep = decoder.decode_by_id(r).ok()?;
-            rep.get_refs(3)?.into_iter().find_map(|styled| {
-                let s = decoder.decode_by_id(styled).ok()?;
-                colour_of_styles(s.get(1)?, &mut decoder)
-            })
+            rep.get_refs(3)?
+                .into_iter()
+                .take(MAX_STYLES)
+                .find_map(|styled| {
+                    let s = decoder.decode_by_id(styled).ok()?;
+                    colour_of_styles(s.get(1)?, &mut decoder, &mut memo)
+                })
         });
         if let Some(c) = colour {
             rel.material_colour.insert(material, c);
@@ -162,43 +166,84 @@ fn first_material(id: u32, decoder: &mut EntityDecoder) -> Option<u32> {
     None
 }
 
+/// Styles looked at per list, and how deep style assignments are followed: a hostile file
+/// cannot make the lookup explode.
+const MAX_STYLES: usize = 16;
+/// See [`MAX_STYLES`].
+const MAX_DEPTH: u32 = 3;
+
+/// Colours already resolved, by style id (`None`: the style has none, or is being resolved).
+type StyleMemo = FxHashMap<u32, Option<[f32; 4]>>;
+
 /// The first surface colour in a list of presentation styles (or style assignments).
-fn colour_of_styles(styles: &AttributeValue, decoder: &mut EntityDecoder) -> Option<[f32; 4]> {
+fn colour_of_styles(
+    styles: &AttributeValue,
+    decoder: &mut EntityDecoder,
+    memo: &mut StyleMemo,
+) -> Option<[f32; 4]> {
     let ids: Vec<u32> = match styles.as_list() {
         Some(list) => list
             .iter()
             .filter_map(AttributeValue::as_entity_ref)
+            .take(MAX_STYLES)
             .collect(),
         None => styles.as_entity_ref().into_iter().collect(),
     };
     ids.into_iter()
-        .find_map(|id| colour_of_style(id, decoder, 0))
+        .find_map(|id| colour_of_style(id, decoder, memo, 0))
 }
 
 /// A style's colour: an `IfcSurfaceStyle`'s rendering or shading colour, looked for through
-/// style assignments (IFC 2x3) at most a few levels deep.
-fn colour_of_style(id: u32, decoder: &mut EntityDecoder, depth: u32) -> Option<[f32; 4]> {
-    if depth > 3 {
+/// style assignments (IFC 2x3) at most [`MAX_DEPTH`] levels deep, each style once.
+fn colour_of_style(
+    id: u32,
+    decoder: &mut EntityDecoder,
+    memo: &mut StyleMemo,
+    depth: u32,
+) -> Option<[f32; 4]> {
+    if let Some(known) = memo.get(&id) {
+        return *known;
+    }
+    // Marked before looking, so a style that lists itself ends the search.
+    memo.insert(id, None);
+    let found = resolve_style(id, decoder, memo, depth);
+    memo.insert(id, found);
+    found
+}
+
+/// [`colour_of_style`] without the memo.
+fn resolve_style(
+    id: u32,
+    decoder: &mut EntityDecoder,
+    memo: &mut StyleMemo,
+    depth: u32,
+) -> Option<[f32; 4]> {
+    if depth > MAX_DEPTH {
         return None;
     }
     let style = decoder.decode_by_id(id).ok()?;
     match style.ifc_type {
-        IfcType::IfcSurfaceStyle => style.get_refs(2)?.into_iter().find_map(|r| {
-            let shading = decoder.decode_by_id(r).ok()?;
-            if !matches!(
-                shading.ifc_type,
-                IfcType::IfcSurfaceStyleRendering | IfcType::IfcSurfaceStyleShading
-            ) {
-                return None;
-            }
-            let rgb = decoder.decode_by_id(shading.get_ref(0)?).ok()?;
-            let c = [1, 2, 3].map(|k| rgb.get_float(k).unwrap_or(0.8).clamp(0.0, 1.0) as f32);
-            let alpha = 1.0 - shading.get_float(1).unwrap_or(0.0).clamp(0.0, 1.0) as f32;
-            Some([c[0], c[1], c[2], alpha])
-        }),
+        IfcType::IfcSurfaceStyle => style
+            .get_refs(2)?
+            .into_iter()
+            .take(MAX_STYLES)
+            .find_map(|r| {
+                let shading = decoder.decode_by_id(r).ok()?;
+                if !matches!(
+                    shading.ifc_type,
+                    IfcType::IfcSurfaceStyleRendering | IfcType::IfcSurfaceStyleShading
+                ) {
+                    return None;
+                }
+                let rgb = decoder.decode_by_id(shading.get_ref(0)?).ok()?;
+                let c = [1, 2, 3].map(|k| rgb.get_float(k).unwrap_or(0.8).clamp(0.0, 1.0) as f32);
+                let alpha = 1.0 - shading.get_float(1).unwrap_or(0.0).clamp(0.0, 1.0) as f32;
+                Some([c[0], c[1], c[2], alpha])
+            }),
         _ => style
             .get_refs(0)?
             .into_iter()
-            .find_map(|r| colour_of_style(r, decoder, depth + 1)),
+            .take(MAX_STYLES)
+            .find_map(|r| colour_of_style(r, decoder, memo, depth + 1)),
     }
 }
