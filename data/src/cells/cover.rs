@@ -150,24 +150,19 @@ impl Grid {
     fn cover(&self, tris: &[[Vec2; 3]]) -> Vec<bool> {
         let (nu, nv) = self.cells();
         // Points: corners at (2i, 2j), centres at (2i+1, 2j+1), on a doubled lattice.
-        let mu: Vec<f32> = (0..2 * nu + 1)
-            .map(|k| {
-                if k % 2 == 0 {
-                    self.u[k / 2]
-                } else {
-                    (self.u[k / 2] + self.u[k / 2 + 1]) * 0.5
-                }
-            })
-            .collect();
-        let mv: Vec<f32> = (0..2 * nv + 1)
-            .map(|k| {
-                if k % 2 == 0 {
-                    self.v[k / 2]
-                } else {
-                    (self.v[k / 2] + self.v[k / 2 + 1]) * 0.5
-                }
-            })
-            .collect();
+        // Each line and the midpoint after it.
+        let doubled = |l: &[f32]| -> Vec<f32> {
+            (0..2 * l.len() - 1)
+                .map(|k| {
+                    if k % 2 == 0 {
+                        l[k / 2]
+                    } else {
+                        (l[k / 2] + l[k / 2 + 1]) * 0.5
+                    }
+                })
+                .collect()
+        };
+        let (mu, mv) = (doubled(&self.u), doubled(&self.v));
         let mut inside = vec![false; mu.len() * mv.len()];
         for t in tris {
             let (lo, hi) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));

@@ -212,9 +212,7 @@ pub fn occluder_boxes<'a>(
         if any_tagged && boxes.is_empty() {
             // Not written as whole boxes (a BIM wall cut around its openings, a gable):
             // what its triangles cover on both faces.
-            if let Some((s, f)) = super::cover::covered(mesh, &m) {
-                solids.extend(s.iter().filter_map(|b| transform_box(b, &Mat4::IDENTITY)));
-                out.extend(f.iter().filter_map(|b| transform_box(b, &Mat4::IDENTITY)));
+            if add_covered(mesh, &m, &mut solids, &mut out) {
                 continue;
             }
         }
@@ -265,10 +263,7 @@ pub fn structural<'a>(instances: impl Iterator<Item = (&'a Mesh, Mat4, bool)>) -
         if !(thick && large) {
             continue;
         }
-        if let Some((sol, f)) = super::cover::covered(mesh, &m) {
-            solids.extend(sol.iter().filter_map(|b| transform_box(b, &Mat4::IDENTITY)));
-            faces.extend(f.iter().filter_map(|b| transform_box(b, &Mat4::IDENTITY)));
-        }
+        add_covered(mesh, &m, &mut solids, &mut faces);
     }
     sort_dedup(&mut faces);
     sort_dedup(&mut solids);
@@ -277,6 +272,17 @@ pub fn structural<'a>(instances: impl Iterator<Item = (&'a Mesh, Mat4, bool)>) -
         solids,
         rooms: Vec::new(),
     }
+}
+
+/// Adds what a wall or slab covers ([`super::cover::covered`]), snapped to the grid, to
+/// `solids` and `faces`; false when it is not one.
+fn add_covered(mesh: &Mesh, m: &Mat4, solids: &mut Vec<Aabb>, faces: &mut Vec<Aabb>) -> bool {
+    let Some((s, f)) = super::cover::covered(mesh, m) else {
+        return false;
+    };
+    solids.extend(s.iter().filter_map(|b| transform_box(b, &Mat4::IDENTITY)));
+    faces.extend(f.iter().filter_map(|b| transform_box(b, &Mat4::IDENTITY)));
+    true
 }
 
 #[cfg(test)]

@@ -209,8 +209,8 @@ fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
         if !p.name.is_empty() {
             tags.insert("name".to_string(), p.name);
         }
-        if let Some(s) = rel.storey_of.get(&p.id).and_then(|s| rel.storeys.get(s)) {
-            tags.insert("storey".to_string(), s.name.clone());
+        if let Some(s) = rel.storey_name(p.id) {
+            tags.insert("storey".to_string(), s);
         }
         model.instances.push(Instance {
             name: label,
@@ -224,14 +224,9 @@ fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
     for id in spaces {
         match space_box(id, &router, &mut decoder) {
             Ok(Some((name, b))) => {
-                let storey = rel
-                    .storey_of
-                    .get(&id)
-                    .and_then(|s| rel.storeys.get(s))
-                    .map(|s| s.name.clone());
                 model.spaces.push(Space {
                     name,
-                    storey,
+                    storey: rel.storey_name(id),
                     bounds: Aabb {
                         min: (b.min - origin).as_vec3().to_array(),
                         max: (b.max - origin).as_vec3().to_array(),
@@ -299,14 +294,7 @@ fn mesh_product(
             .unwrap_or(fallback);
         let colour = linear(colour);
         let base = part.positions.len() as u32;
-        let o = m.origin;
-        for p in m.positions.chunks_exact(3) {
-            part.positions.push(y_up(
-                o[0] + p[0] as f64,
-                o[1] + p[1] as f64,
-                o[2] + p[2] as f64,
-            ));
-        }
+        part.positions.extend(world_positions(m));
         let count = m.positions.len() / 3;
         if m.normals.len() == m.positions.len() {
             for n in m.normals.chunks_exact(3) {
@@ -353,15 +341,16 @@ fn space_box(
         .process_element(&e, decoder)
         .map_err(|e| e.to_string())?;
     let mut b = DBox::EMPTY;
-    let o = m.origin;
-    for p in m.positions.chunks_exact(3) {
-        b.include(y_up(
-            o[0] + p[0] as f64,
-            o[1] + p[1] as f64,
-            o[2] + p[2] as f64,
-        ));
-    }
+    world_positions(&m).for_each(|p| b.include(p));
     Ok((!b.is_empty()).then_some((name, b)))
+}
+
+/// A kernel mesh's vertices in world space (its origin added, in f64), Y up.
+fn world_positions(m: &ifc_lite_geometry::Mesh) -> impl Iterator<Item = DVec3> + '_ {
+    let o = m.origin;
+    m.positions
+        .chunks_exact(3)
+        .map(move |p| y_up(o[0] + p[0] as f64, o[1] + p[1] as f64, o[2] + p[2] as f64))
 }
 
 /// sRGB (as IFC writes colours) to linear, alpha kept.

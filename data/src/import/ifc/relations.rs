@@ -33,6 +33,14 @@ pub struct Relations {
     pub material_of: FxHashMap<u32, u32>,
 }
 
+impl Relations {
+    /// The name of the storey a product or space is on, if the file says.
+    pub fn storey_name(&self, id: u32) -> Option<String> {
+        let storey = self.storey_of.get(&id)?;
+        self.storeys.get(storey).map(|s| s.name.clone())
+    }
+}
+
 /// Scans the whole file once and resolves the relations above.
 pub fn scan(content: &str) -> Relations {
     let mut rel = Relations::default();
