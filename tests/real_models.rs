@@ -62,17 +62,19 @@ impl Drop for Server {
     }
 }
 
+/// Builds `model` into `dir/m.portico` with `extra` build flags.
+fn build_in(dir: &Path, model: &Path, extra: &[&str]) -> PathBuf {
+    let db = dir.join("m.portico");
+    let mut args = vec!["build", model.to_str().unwrap(), "-o", db.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    portico(&args);
+    db
+}
+
 /// Builds, serves and walks a model; returns drawn triangles per frame.
 fn walk_model(model: &Path) -> Vec<u64> {
     let dir = tempfile::tempdir().unwrap();
-    let db = dir.path().join("m.portico");
-    portico(&[
-        "build",
-        model.to_str().unwrap(),
-        "-o",
-        db.to_str().unwrap(),
-        "--no-textures",
-    ]);
+    let db = build_in(dir.path(), model, &["--no-textures"]);
     let server = Server::start(&db);
     let out = dir.path().join("walk");
     portico(&[
@@ -128,15 +130,8 @@ fn roomless_models_get_an_orbit_and_a_flythrough() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let db = dir.path().join("engine.portico");
+    let db = build_in(dir.path(), &m, &["--no-hierarchy"]);
     let path = dir.path().join("path.json");
-    portico(&[
-        "build",
-        m.to_str().unwrap(),
-        "-o",
-        db.to_str().unwrap(),
-        "--no-hierarchy",
-    ]);
     portico(&[
         "path",
         "--db",
@@ -191,15 +186,7 @@ fn a_frame_in_each_room_of_the_ifc_house_shows_that_room() {
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let db = dir.path().join("haus.portico");
-    portico(&[
-        "build",
-        m.to_str().unwrap(),
-        "-o",
-        db.to_str().unwrap(),
-        "--no-hierarchy",
-        "--no-cells",
-    ]);
+    let db = build_in(dir.path(), &m, &["--no-hierarchy", "--no-cells"]);
     let spaces = portico_data::import::import_file(&m).unwrap().spaces;
     assert_eq!(spaces.len(), 7);
     let db = portico_data::Database::open(&db).unwrap();
