@@ -241,6 +241,19 @@ fn the_cells_are_the_rooms_and_the_doors_join_them() {
 }
 
 #[test]
+fn a_truncated_file_builds_what_it_holds_and_says_it_is_truncated() {
+    let Some(_) = haus() else { return };
+    let bytes = std::fs::read(HAUS).unwrap();
+    let m = import_bytes(&bytes[..200_000], "ifc").expect("the first products import");
+    assert!(!m.instances.is_empty());
+    assert!(
+        m.warnings.iter().any(|w| w.contains("truncated")),
+        "{:?}",
+        m.warnings
+    );
+}
+
+#[test]
 fn a_file_that_is_not_ifc_is_one_clear_error() {
     let e = import_bytes(b"solid cube\nendsolid\n", "ifc").unwrap_err();
     assert!(e.contains("not an IFC file"), "{e}");

@@ -119,6 +119,13 @@ fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
         return Err("contains no building elements with a shape".into());
     }
     let mut warnings = Vec::new();
+    if !bytes.trim_ascii_end().ends_with(b"END-ISO-10303-21;") {
+        warnings.push(format!(
+            "the file does not end with END-ISO-10303-21: it looks truncated, and only the {} \
+             product(s) before the cut are read",
+            products.len()
+        ));
+    }
     let mut parts = Vec::new();
     let mut failed = Vec::new();
     let mut empty = Vec::new();
