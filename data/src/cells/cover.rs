@@ -36,7 +36,8 @@ const PLANE_TOLERANCE: f32 = 2e-3;
 const EDGE_SLACK: f32 = 1e-5;
 
 /// The solid boxes and occluder faces (flat boxes) of a thin wall or slab, in world space;
-/// `None` when the object is not thin along a world axis.
+/// `None` when the object is not thin along a world axis, has no triangles in one of its two
+/// faces, is open at its sides, or is finer than the budget.
 pub fn covered(mesh: &Mesh, m: &Mat4) -> Option<(Vec<Aabb>, Vec<Aabb>)> {
     let pts: Vec<Vec3> = mesh
         .vertices
@@ -65,8 +66,8 @@ pub fn covered(mesh: &Mesh, m: &Mat4) -> Option<(Vec<Aabb>, Vec<Aabb>)> {
         return None;
     }
     // Closed all round: the sides (triangles facing sideways; mitred ends are slanted) must
-    // add up to the outline of a face times the thickness, or the space between the faces is not solid (a
-    // table with a shelf under it, a double skin open at its ends).
+    // add up to the outline of a face times the thickness, or the space between the faces is
+    // not solid (a table with a shelf under it, a double skin open at its ends).
     let edges = [boundary(&on[0]), boundary(&on[1])];
     let outline: f32 = edges[0].iter().map(|(a, b)| a.distance(*b)).sum();
     let sides: f32 = mesh
@@ -149,8 +150,8 @@ impl Grid {
     /// Which cells (row-major by `v`) have their four corners and centre covered.
     fn cover(&self, tris: &[[Vec2; 3]]) -> Vec<bool> {
         let (nu, nv) = self.cells();
-        // Points: corners at (2i, 2j), centres at (2i+1, 2j+1), on a doubled lattice.
-        // Each line and the midpoint after it.
+        // Points: corners at (2i, 2j), centres at (2i+1, 2j+1), on a doubled lattice (each
+        // line and the midpoint after it).
         let doubled = |l: &[f32]| -> Vec<f32> {
             (0..2 * l.len() - 1)
                 .map(|k| {
