@@ -197,6 +197,8 @@ fn native_view(db: &Path, eye: [f32; 3], dir: [f32; 3]) -> image::RgbaImage {
                 .materials
                 .get(inst.material as usize)
                 .map_or([1.0; 4], |m| m.base_color),
+            texture: None,
+            alpha: Default::default(),
         })
         .collect();
     r.render_to_image(&vp.camera, &draws).unwrap().1

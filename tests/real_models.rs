@@ -221,6 +221,8 @@ fn a_frame_in_each_room_of_the_ifc_house_shows_that_room() {
                     mesh,
                     transform: glam::Mat4::from_cols_array(&i.transform),
                     color: [1.0; 4],
+                    texture: None,
+                    alpha: Default::default(),
                 })
                 .collect()
         };

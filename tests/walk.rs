@@ -133,6 +133,8 @@ fn full_detail(
                 .materials
                 .get(i.material as usize)
                 .map_or([1.0; 4], |m| m.base_color),
+            texture: None,
+            alpha: Default::default(),
         })
         .collect();
     let (eye, dir) = path.sample(0.0);

@@ -64,7 +64,7 @@ impl Scene<'_> {
 }
 
 /// One object drawn: the instance and the LOD chosen (an index into its full LOD table).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Drawn {
     /// The instance.
     pub instance: u32,
@@ -72,6 +72,43 @@ pub struct Drawn {
     pub lod: usize,
     /// The LOD's geometry segment.
     pub segment: u32,
+    /// The texture segment it is drawn with: the finest resident one of its material's
+    /// texture, when the LOD has texture coordinates (never waited for).
+    pub texture: Option<u32>,
+    /// The material colour the draw multiplies in (linear RGBA): the base colour, times the
+    /// texture's average colour when the object is textured but drawn without its texture.
+    pub tint: [f32; 4],
+}
+
+/// The texture segment and the tint an instance's LOD is drawn with ([`Drawn::texture`],
+/// [`Drawn::tint`]), given what is resident.
+pub fn material_of(
+    header: &Header,
+    instance: u32,
+    lod: usize,
+    has: &dyn Fn(u32) -> bool,
+) -> (Option<u32>, [f32; 4]) {
+    let Some(inst) = header.instances.get(instance as usize) else {
+        return (None, [1.0; 4]);
+    };
+    let base = header
+        .materials
+        .get(inst.material as usize)
+        .map_or([1.0; 4], |m| m.base_color);
+    let Some(t) = header.texture_of(inst) else {
+        return (None, base);
+    };
+    let uv = header.lods_of(inst).get(lod).is_some_and(|l| l.uv);
+    let segment = t
+        .segments
+        .iter()
+        .rev()
+        .map(|s| s.segment)
+        .find(|&s| uv && has(s));
+    match segment {
+        Some(s) => (Some(s), base),
+        None => (None, std::array::from_fn(|k| base[k] * t.average[k])),
+    }
 }
 
 /// The decision for one frame.
@@ -202,10 +239,19 @@ impl Decider {
             let lods = scene.header.lods_of(inst);
             touched.extend(lods.iter().map(|l| l.segment).filter(|&s| resident.has(s)));
             if let Some(l) = ch.lod {
+                let (texture, tint) = material_of(scene.header, c.id, l + skip, &has);
+                // The texture drawn and its coarse segment stay at the head of the cache.
+                if let Some(t) = texture {
+                    touched.push(t);
+                    let coarse = scene.header.texture_of(inst).map(|t| t.segments[0].segment);
+                    touched.extend(coarse.filter(|&s| s != t && resident.has(s)));
+                }
                 drawn.push(Drawn {
                     instance: c.id,
                     lod: l + skip,
                     segment: lods[l + skip].segment,
+                    texture,
+                    tint,
                 });
             }
         }

@@ -17,6 +17,7 @@ use crate::geometry::{Aabb, encode_geometry};
 use crate::hierarchy::{self, Hierarchy, ImpostorPainter, PaintItem};
 use crate::lod::{LodMesh, complete_lods};
 use crate::model::{Instance, Model};
+use crate::texture::{self, MipSegment, TextureImage, TextureRecord};
 use glam::Mat4;
 use rayon::prelude::*;
 use std::path::Path;
@@ -101,6 +102,7 @@ pub fn build_with(
         origin,
         warnings: _,
         spaces,
+        textures,
     } = model;
     // Occluders come from the source meshes, before LOD optimisation reorders their triangles.
     let occluders = (!opts.no_cells).then(|| {
@@ -130,6 +132,7 @@ pub fn build_with(
 
     let t1 = Instant::now();
     let mut w = DbWriter::create(out)?;
+    let textures = write_textures(&mut w, &textures, obs)?;
     let objects = write_objects(&mut w, &lods, opts, obs)?;
     let records = if opts.flatten {
         write_flattened(&mut w, &lods, &instances, opts.compress, obs)?
@@ -174,6 +177,7 @@ pub fn build_with(
         bounds,
         origin,
         materials,
+        textures,
         objects,
         instances: records,
         cells,
@@ -359,6 +363,7 @@ fn write_objects(
                 bounds: levels.first().map_or(Aabb::EMPTY, |l| l.mesh.bounds()),
                 material: *material,
                 lods: records,
+                uv_span: levels.first().map_or(0.0, |l| l.mesh.uv_span()),
             })
         })
         .collect()
@@ -422,7 +427,7 @@ fn write_lod(w: &mut DbWriter, l: &LodMesh, bytes: Vec<u8>, error: f32) -> Resul
     let segment = if crate::codec::is_compressed(&bytes) {
         // The index says so, with the size it decodes to: inspect and old readers see it
         // without reading the segment.
-        let decoded = crate::geometry::plain_size(vertices, triangles);
+        let decoded = crate::geometry::plain_size(vertices, triangles, l.mesh.has_uvs());
         w.add_segment_flagged(
             SegmentKind::Geometry,
             &bytes,
@@ -437,7 +442,47 @@ fn write_lod(w: &mut DbWriter, l: &LodMesh, bytes: Vec<u8>, error: f32) -> Resul
         triangles,
         vertices,
         error,
+        uv: l.mesh.has_uvs(),
     })
+}
+
+/// Writes each texture's mip chain as segments, coarsest first ([`crate::texture`]), and
+/// returns their header records.
+fn write_textures(
+    w: &mut DbWriter,
+    textures: &[TextureImage],
+    obs: &dyn Observer,
+) -> Result<Vec<TextureRecord>> {
+    if textures.is_empty() {
+        return Ok(Vec::new());
+    }
+    obs.stage("textures", textures.len() as u64);
+    textures
+        .iter()
+        .map(|t| {
+            let chain = texture::mip_chain(t.width, t.height, &t.rgba);
+            let segments = texture::cut_segments(t.width, t.height, &chain)
+                .into_iter()
+                .map(|(width, height, levels, bytes)| {
+                    Ok(MipSegment {
+                        segment: w.add_segment(SegmentKind::Mips, &bytes)?,
+                        width,
+                        height,
+                        levels,
+                    })
+                })
+                .collect::<Result<Vec<_>>>()?;
+            obs.advance(1);
+            Ok(TextureRecord {
+                name: t.name.clone(),
+                width: t.width,
+                height: t.height,
+                segments,
+                average: texture::average_color(&t.rgba),
+                wrap: t.wrap,
+            })
+        })
+        .collect()
 }
 
 /// The header record of an instance; flattened instances get their own LODs and identity.

@@ -10,7 +10,9 @@
 //!                            index_offset locate the two encoded streams, reserved = their lengths
 //! 32  origin [f32; 3], step [f32; 3]   position = origin + q * step, q: u16 per axis
 //! 56  encoded vertex stream  16 B per vertex before encoding: q [u16; 3], 0u16, the normal's
-//!                            snorm8 bytes and the colour's unorm8 bytes exactly as stored
+//!                            snorm8 bytes and the colour's unorm8 bytes exactly as stored;
+//!                            with GEOMETRY_UV, 24 B: then the texture coordinates as f32 × 2
+//!                            (kept bit for bit: repeating textures need their full range)
 //! ..  encoded index stream   triangles, in the order the LOD step optimised them for (the
 //!                            codec keeps order and winding; a triangle may start at another
 //!                            of its corners)
@@ -30,8 +32,8 @@
 #[cfg(feature = "native")]
 use crate::geometry::GEOMETRY_U32_INDICES;
 use crate::geometry::{
-    GEOMETRY_MAGIC, GEOMETRY_MESHOPT, GEOMETRY_VERSION, GeometryHeader, GeometryView, Mesh, Vertex,
-    encode_geometry,
+    GEOMETRY_MAGIC, GEOMETRY_MESHOPT, GEOMETRY_UV, GEOMETRY_VERSION, GeometryHeader, GeometryView,
+    Mesh, Vertex, encode_geometry,
 };
 use bytemuck::{Pod, Zeroable};
 use meshoptimizer_rs::{Limits, Workspace};
@@ -44,6 +46,14 @@ struct Packed {
     q: [u16; 4],
     normal: [i8; 4],
     color: [u8; 4],
+}
+
+/// A textured vertex before the vertex codec (24 bytes).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, Pod, Zeroable)]
+struct PackedUv {
+    p: Packed,
+    uv: [f32; 2],
 }
 
 const HEADER: usize = std::mem::size_of::<GeometryHeader>();
@@ -87,6 +97,7 @@ pub fn encode(mesh: &Mesh) -> Vec<u8> {
             0.0
         }
     });
+    let uv = mesh.has_uvs();
     let packed: Vec<Packed> = mesh
         .vertices
         .iter()
@@ -104,8 +115,17 @@ pub fn encode(mesh: &Mesh) -> Vec<u8> {
             color: v.color,
         })
         .collect();
-    let vertices =
-        meshopt::encode_vertex_buffer_level(&packed, 3, Some(1)).expect("meshopt vertex encoding");
+    let vertices = if uv {
+        let with_uv: Vec<PackedUv> = packed
+            .iter()
+            .zip(&mesh.uvs)
+            .map(|(&p, &uv)| PackedUv { p, uv })
+            .collect();
+        meshopt::encode_vertex_buffer_level(&with_uv, 3, Some(1))
+    } else {
+        meshopt::encode_vertex_buffer_level(&packed, 3, Some(1))
+    }
+    .expect("meshopt vertex encoding");
     let indices = if mesh.indices.is_empty() {
         Vec::new()
     } else {
@@ -118,7 +138,9 @@ pub fn encode(mesh: &Mesh) -> Vec<u8> {
     let header = GeometryHeader {
         magic: GEOMETRY_MAGIC,
         version: GEOMETRY_VERSION,
-        flags: GEOMETRY_MESHOPT | if wide { GEOMETRY_U32_INDICES } else { 0 },
+        flags: GEOMETRY_MESHOPT
+            | if wide { GEOMETRY_U32_INDICES } else { 0 }
+            | if uv { GEOMETRY_UV } else { 0 },
         vertex_count: mesh.vertices.len() as u32,
         index_count: mesh.indices.len() as u32,
         vertex_offset: vertex_offset as u32,
@@ -161,7 +183,8 @@ pub fn to_gpu_layout_as(
     expected: Option<u64>,
 ) -> Result<Cow<'_, [u8]>, String> {
     if let Some(h) = compressed_header(bytes) {
-        let claims = crate::geometry::plain_size(h.vertex_count, h.index_count / 3);
+        let uv = h.flags & GEOMETRY_UV != 0;
+        let claims = crate::geometry::plain_size(h.vertex_count, h.index_count / 3, uv);
         if expected != Some(claims) || h.index_count % 3 != 0 {
             return Err(format!(
                 "segment {id}: its counts ({} vertices, {} indices) disagree with its LOD record",
@@ -216,11 +239,16 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<u8>, String> {
     let vs = stream(h.vertex_offset, h.reserved[0], "vertex")?;
     let is = stream(h.index_offset, h.reserved[1], "index")?;
     let (nv, ni) = (h.vertex_count as usize, h.index_count as usize);
+    let uv = h.flags & GEOMETRY_UV != 0;
+    let stride = if uv {
+        std::mem::size_of::<PackedUv>()
+    } else {
+        std::mem::size_of::<Packed>()
+    };
     // In u64: on wasm32 a usize product of a few megabytes would wrap.
     let too_many = h.vertex_count > MAX_DECODED_COUNT
         || h.index_count > MAX_DECODED_COUNT
-        || nv as u64 * std::mem::size_of::<Packed>() as u64
-            > (vs.len() as u64 + 64) * MAX_VERTEX_EXPANSION as u64
+        || nv as u64 * stride as u64 > (vs.len() as u64 + 64) * MAX_VERTEX_EXPANSION as u64
         || ni as u64 > is.len() as u64 * 3;
     if too_many {
         return Err(format!(
@@ -237,16 +265,24 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<u8>, String> {
     // MAX_DECODED_COUNT each); the workspace is the codecs' scratch, bounded by the crate's
     // default limits.
     let mut ws = Workspace::new(Limits::default());
-    let mut packed = vec![Packed::zeroed(); nv];
+    let mut packed = vec![PackedUv::zeroed(); nv];
     if nv > 0 {
+        let out: &mut [u8] = bytemuck::cast_slice_mut(&mut packed);
         meshoptimizer_rs::codec::decode_vertex_buffer_into(
-            bytemuck::cast_slice_mut(&mut packed),
+            &mut out[..nv * stride],
             nv,
-            std::mem::size_of::<Packed>(),
+            stride,
             vs,
             &mut ws,
         )
         .map_err(|e| format!("vertex stream: {e}"))?;
+        if !uv {
+            // The stream was written 16 bytes a vertex: spread it into the wider records.
+            let raw: Vec<Packed> = bytemuck::cast_slice(&out[..nv * stride]).to_vec();
+            for (dst, p) in packed.iter_mut().zip(raw) {
+                *dst = PackedUv { p, uv: [0.0; 2] };
+            }
+        }
     }
     let mut indices = vec![0u32; ni];
     if ni > 0 {
@@ -267,13 +303,26 @@ pub fn decode(bytes: &[u8]) -> Result<Vec<u8>, String> {
     let (origin, step) = (&quant[..3], &quant[3..]);
     let vertices = packed
         .iter()
-        .map(|p| Vertex {
+        .map(|PackedUv { p, .. }| Vertex {
             position: std::array::from_fn(|a| origin[a] + p.q[a] as f32 * step[a]),
             normal: p.normal,
             color: p.color,
         })
         .collect();
-    Ok(encode_geometry(&Mesh { vertices, indices }))
+    let uvs = if uv {
+        let uvs: Vec<[f32; 2]> = packed.iter().map(|p| p.uv).collect();
+        if uvs.iter().flatten().any(|x| !x.is_finite()) {
+            return Err("a decoded texture coordinate is not a finite number".into());
+        }
+        uvs
+    } else {
+        Vec::new()
+    };
+    Ok(encode_geometry(&Mesh {
+        vertices,
+        indices,
+        uvs,
+    }))
 }
 
 /// The largest distance a position moves through [`encode`] then [`decode`] on each axis:

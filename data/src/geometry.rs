@@ -2,8 +2,9 @@
 //!
 //! A geometry segment is laid out for direct GPU upload: a 32-byte header, then the
 //! interleaved vertex stream (`Vertex`, 20 bytes: position `f32x3`, normal `snorm8x4`, colour
-//! `unorm8x4`), then the index stream (`u16` when every index fits, else `u32`), each 4-byte
-//! aligned. A client binds the vertex and index ranges straight from these bytes (a compressed
+//! `unorm8x4`), then, for a textured mesh ([`GEOMETRY_UV`]), its texture coordinates (`f32x2`
+//! per vertex, glTF's convention: origin at the image's top left), then the index stream (`u16`
+//! when every index fits, else `u32`), each 4-byte aligned. A client binds the vertex and index ranges straight from these bytes (a compressed
 //! segment, [`GEOMETRY_MESHOPT`], is decoded into this layout first).
 
 use bytemuck::{Pod, Zeroable};
@@ -129,6 +130,9 @@ pub struct Mesh {
     pub vertices: Vec<Vertex>,
     /// Triangle list; every index is `< vertices.len()`.
     pub indices: Vec<u32>,
+    /// Texture coordinates, one per vertex (glTF's convention: (0, 0) is the image's top left,
+    /// values past 0..1 repeat), or empty for a mesh without a texture.
+    pub uvs: Vec<[f32; 2]>,
 }
 
 impl Mesh {
@@ -146,8 +150,42 @@ impl Mesh {
         b
     }
 
-    /// Checks the invariants: whole triangles, indices in range.
+    /// Whether the mesh has texture coordinates.
+    pub fn has_uvs(&self) -> bool {
+        !self.uvs.is_empty()
+    }
+
+    /// Largest extent of the texture coordinates on either axis (how many times a texture
+    /// repeats across the mesh; 0 without coordinates). The finest mip worth fetching for an
+    /// object `p` pixels across is about `p / uv_span` texels wide
+    /// ([`crate::texture::useful_width`]).
+    pub fn uv_span(&self) -> f32 {
+        let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+        for uv in &self.uvs {
+            for a in 0..2 {
+                lo[a] = lo[a].min(uv[a]);
+                hi[a] = hi[a].max(uv[a]);
+            }
+        }
+        (0..2)
+            .map(|a| hi[a] - lo[a])
+            .filter(|x| x.is_finite())
+            .fold(0.0, f32::max)
+    }
+
+    /// Checks the invariants: whole triangles, indices in range, one finite texture
+    /// coordinate per vertex or none.
     pub fn validate(&self) -> Result<(), String> {
+        if self.has_uvs() && self.uvs.len() != self.vertices.len() {
+            return Err(format!(
+                "{} texture coordinates for {} vertices",
+                self.uvs.len(),
+                self.vertices.len()
+            ));
+        }
+        if self.uvs.iter().flatten().any(|x| !x.is_finite()) {
+            return Err("a texture coordinate is not a finite number".into());
+        }
         if !self.indices.len().is_multiple_of(3) {
             return Err(format!(
                 "index count {} is not a multiple of 3",
@@ -176,6 +214,7 @@ impl Mesh {
         Mesh {
             vertices,
             indices: self.indices.clone(),
+            uvs: self.uvs.clone(),
         }
     }
 
@@ -212,6 +251,8 @@ pub const GEOMETRY_U32_INDICES: u16 = 1;
 /// Flag: the streams are quantised and meshopt-encoded (`codec`, native builds); such a
 /// segment must be decoded into the plain layout before [`GeometryView::parse`] takes it.
 pub const GEOMETRY_MESHOPT: u16 = 2;
+/// Flag: a texture-coordinate stream (`[f32; 2]` per vertex) follows the vertex stream.
+pub const GEOMETRY_UV: u16 = 4;
 
 /// The fixed 32-byte header at the start of a geometry segment.
 #[repr(C)]
@@ -221,7 +262,8 @@ pub struct GeometryHeader {
     pub magic: u32,
     /// [`GEOMETRY_VERSION`].
     pub version: u16,
-    /// [`GEOMETRY_U32_INDICES`] (of the plain layout) and/or [`GEOMETRY_MESHOPT`], or 0.
+    /// [`GEOMETRY_U32_INDICES`] (of the plain layout), [`GEOMETRY_MESHOPT`],
+    /// [`GEOMETRY_UV`], or 0.
     pub flags: u16,
     /// Number of vertices.
     pub vertex_count: u32,
@@ -236,25 +278,35 @@ pub struct GeometryHeader {
 }
 
 /// The length in bytes of [`encode_geometry`]'s segment for a mesh of `vertices` vertices and
-/// `triangles` triangles: what a geometry segment occupies once decoded, whatever it weighed
-/// on the wire.
-pub fn plain_size(vertices: u32, triangles: u32) -> u64 {
+/// `triangles` triangles (with texture coordinates when `uv`): what a geometry segment occupies
+/// once decoded, whatever it weighed on the wire.
+pub fn plain_size(vertices: u32, triangles: u32, uv: bool) -> u64 {
     let wide = vertices as usize > u16::MAX as usize + 1;
     let indices = triangles as u64 * 3 * if wide { 4 } else { 2 };
     let head = std::mem::size_of::<GeometryHeader>() as u64;
-    let stream = vertices as u64 * std::mem::size_of::<Vertex>() as u64;
-    head + stream + indices.next_multiple_of(4)
+    let stride = std::mem::size_of::<Vertex>() as u64 + if uv { UV_BYTES } else { 0 };
+    head + vertices as u64 * stride + indices.next_multiple_of(4)
 }
+
+/// Bytes of one vertex's texture coordinates in a segment.
+const UV_BYTES: u64 = 8;
 
 /// Encodes a mesh as a geometry segment (header, vertices, indices).
 pub fn encode_geometry(mesh: &Mesh) -> Vec<u8> {
     let wide = mesh.vertices.len() > u16::MAX as usize + 1;
+    let uv = mesh.has_uvs();
     let vertex_offset = std::mem::size_of::<GeometryHeader>();
-    let index_offset = vertex_offset + mesh.vertices.len() * std::mem::size_of::<Vertex>();
+    let index_offset = vertex_offset
+        + mesh.vertices.len() * std::mem::size_of::<Vertex>()
+        + if uv {
+            std::mem::size_of_val(mesh.uvs.as_slice())
+        } else {
+            0
+        };
     let header = GeometryHeader {
         magic: GEOMETRY_MAGIC,
         version: GEOMETRY_VERSION,
-        flags: if wide { GEOMETRY_U32_INDICES } else { 0 },
+        flags: if wide { GEOMETRY_U32_INDICES } else { 0 } | if uv { GEOMETRY_UV } else { 0 },
         vertex_count: mesh.vertices.len() as u32,
         index_count: mesh.indices.len() as u32,
         vertex_offset: vertex_offset as u32,
@@ -264,6 +316,9 @@ pub fn encode_geometry(mesh: &Mesh) -> Vec<u8> {
     let mut out = Vec::with_capacity(index_offset + mesh.indices.len() * 4 + 4);
     out.extend_from_slice(bytemuck::bytes_of(&header));
     out.extend_from_slice(bytemuck::cast_slice(&mesh.vertices));
+    if uv {
+        out.extend_from_slice(bytemuck::cast_slice(&mesh.uvs));
+    }
     if wide {
         out.extend_from_slice(bytemuck::cast_slice(&mesh.indices));
     } else {
@@ -284,6 +339,9 @@ pub struct GeometryView<'a> {
     pub header: GeometryHeader,
     /// The raw vertex stream (`vertex_count * 20` bytes), ready for a vertex buffer.
     pub vertex_bytes: &'a [u8],
+    /// The raw texture-coordinate stream (`vertex_count * 8` bytes), empty without
+    /// [`GEOMETRY_UV`].
+    pub uv_bytes: &'a [u8],
     /// The raw index stream, ready for an index buffer.
     pub index_bytes: &'a [u8],
 }
@@ -310,17 +368,29 @@ impl<'a> GeometryView<'a> {
             2
         };
         let ilen = header.index_count as usize * isize;
+        let uvlen = if header.flags & GEOMETRY_UV != 0 {
+            header.vertex_count as usize * UV_BYTES as usize
+        } else {
+            0
+        };
         let vr = header.vertex_offset as usize..header.vertex_offset as usize + vlen;
+        let ur = vr.end..vr.end + uvlen;
         let ir = header.index_offset as usize..header.index_offset as usize + ilen;
-        let (Some(vertex_bytes), Some(index_bytes)) = (bytes.get(vr), bytes.get(ir)) else {
+        let (Some(vertex_bytes), Some(uv_bytes), Some(index_bytes)) =
+            (bytes.get(vr), bytes.get(ur.clone()), bytes.get(ir.clone()))
+        else {
             return Err("geometry streams run past the end of the segment".into());
         };
+        if ir.start < ur.end && !ir.is_empty() {
+            return Err("geometry index stream overlaps the vertex streams".into());
+        }
         if !header.index_count.is_multiple_of(3) {
             return Err("geometry index count is not a multiple of 3".into());
         }
         let view = GeometryView {
             header,
             vertex_bytes,
+            uv_bytes,
             index_bytes,
         };
         let n = header.vertex_count;
@@ -359,6 +429,11 @@ impl<'a> GeometryView<'a> {
                 .map(bytemuck::pod_read_unaligned)
                 .collect(),
             indices: self.indices().collect(),
+            uvs: self
+                .uv_bytes
+                .chunks_exact(UV_BYTES as usize)
+                .map(bytemuck::pod_read_unaligned)
+                .collect(),
         }
     }
 }
@@ -372,17 +447,27 @@ mod tests {
             .map(|i| Vertex::new([i as f32, 0.0, 1.0], [0.0, 1.0, 0.0], [1.0, 0.5, 0.0, 1.0]))
             .collect();
         let indices = (0..n as u32 - 2).flat_map(|i| [0, i + 1, i + 2]).collect();
-        Mesh { vertices, indices }
+        Mesh {
+            vertices,
+            indices,
+            uvs: Vec::new(),
+        }
+    }
+
+    fn textured(n: usize) -> Mesh {
+        let mut m = quad(n);
+        m.uvs = (0..n).map(|i| [i as f32 * 0.5, 1.0 - i as f32]).collect();
+        m
     }
 
     #[test]
     fn plain_size_is_the_encoded_length() {
         // One triangle (6 index bytes, padded), two (12, no padding), narrow and wide indices.
         for n in [3usize, 4, 7, 65_536, 65_537, 70_000] {
-            let m = quad(n);
+            let m = if n % 2 == 0 { textured(n) } else { quad(n) };
             let (v, t) = (m.vertices.len() as u32, m.triangle_count() as u32);
             assert_eq!(
-                plain_size(v, t),
+                plain_size(v, t, m.has_uvs()),
                 encode_geometry(&m).len() as u64,
                 "{n} vertices"
             );
@@ -392,12 +477,14 @@ mod tests {
     #[test]
     fn geometry_round_trips_with_narrow_and_wide_indices() {
         for n in [3usize, 7, 70_000] {
-            let m = quad(n);
-            let bytes = encode_geometry(&m);
-            assert_eq!(bytes.len() % 4, 0);
-            let view = GeometryView::parse(&bytes).expect("parse");
-            assert_eq!(view.wide_indices(), n > 65_536);
-            assert_eq!(view.to_mesh(), m);
+            for m in [quad(n), textured(n)] {
+                let bytes = encode_geometry(&m);
+                assert_eq!(bytes.len() % 4, 0);
+                let view = GeometryView::parse(&bytes).expect("parse");
+                assert_eq!(view.wide_indices(), n > 65_536);
+                assert_eq!(view.uv_bytes.len(), m.uvs.len() * 8);
+                assert_eq!(view.to_mesh(), m);
+            }
         }
     }
 
@@ -413,10 +500,33 @@ mod tests {
 
     #[test]
     fn short_segment_is_rejected() {
-        let bytes = encode_geometry(&quad(5));
-        for cut in [0, 10, 31, bytes.len() - 3] {
-            assert!(GeometryView::parse(&bytes[..cut]).is_err(), "cut at {cut}");
+        for m in [quad(5), textured(5)] {
+            let bytes = encode_geometry(&m);
+            for cut in [0, 10, 31, bytes.len() - 3] {
+                assert!(GeometryView::parse(&bytes[..cut]).is_err(), "cut at {cut}");
+            }
         }
+    }
+
+    #[test]
+    fn a_uv_stream_under_the_indices_is_rejected() {
+        let mut bytes = encode_geometry(&textured(5));
+        let mut h: GeometryHeader = bytemuck::pod_read_unaligned(&bytes[..32]);
+        h.index_offset -= 8;
+        bytes[..32].copy_from_slice(bytemuck::bytes_of(&h));
+        let err = GeometryView::parse(&bytes).unwrap_err();
+        assert!(err.contains("overlaps"), "{err}");
+    }
+
+    #[test]
+    fn uv_span_counts_repeats() {
+        let mut m = textured(4);
+        assert_eq!(m.uv_span(), 3.0);
+        m.uvs.clear();
+        assert_eq!(m.uv_span(), 0.0);
+        assert!(m.validate().is_ok());
+        m.uvs = vec![[0.0; 2]; 3];
+        assert!(m.validate().is_err());
     }
 
     #[test]

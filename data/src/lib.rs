@@ -31,6 +31,7 @@ pub mod path;
 pub mod prefetch;
 #[cfg(feature = "native")]
 pub mod stats;
+pub mod texture;
 
 pub use error::{DataError, Result};
 #[cfg(feature = "native")]

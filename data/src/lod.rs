@@ -6,6 +6,11 @@
 //! many seams to halve), and finally an average-colour bounding box (Maciel §5.2). Every LOD
 //! records its geometric error in metres: meshopt's error for simplified levels, and a measured
 //! point-to-surface distance for the source's own levels and the box.
+//!
+//! Textured meshes keep their coordinates: the simplifier weighs them as attributes
+//! (`meshopt_simplifyWithAttributes`) and never collapses across a UV seam (seam vertices share
+//! a position but not an index, which meshopt keeps apart); every vertex reordering carries the
+//! coordinates along. The box LOD has none: it is drawn in the texture's average colour.
 
 use crate::geometry::{Aabb, Mesh, Vertex};
 use glam::Vec3;
@@ -66,18 +71,74 @@ pub fn complete_lods(given: Vec<Mesh>) -> Vec<LodMesh> {
     out
 }
 
+/// How much a texture coordinate's change weighs against a position's (metres per UV unit):
+/// a texture repeating over a few metres should not slide by more than a texel or so.
+const UV_WEIGHT: f32 = 0.5;
+
+/// A vertex with its texture coordinate, so reorderings move both together.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default)]
+struct Textured {
+    vertex: Vertex,
+    uv: [f32; 2],
+}
+
+/// `mesh` with its vertices reordered by `f` (which reorders `indices` to match), texture
+/// coordinates carried along.
+fn reorder(
+    mesh: &Mesh,
+    mut indices: Vec<u32>,
+    f: impl FnOnce(&mut Vec<u32>, &[Textured]) -> Vec<Textured>,
+) -> Mesh {
+    let joined: Vec<Textured> = mesh
+        .vertices
+        .iter()
+        .enumerate()
+        .map(|(i, &vertex)| Textured {
+            vertex,
+            uv: mesh.uvs.get(i).copied().unwrap_or_default(),
+        })
+        .collect();
+    let out = f(&mut indices, &joined);
+    Mesh {
+        vertices: out.iter().map(|t| t.vertex).collect(),
+        uvs: if mesh.has_uvs() {
+            out.iter().map(|t| t.uv).collect()
+        } else {
+            Vec::new()
+        },
+        indices,
+    }
+}
+
 /// Simplifies `finest` to at most `target` triangles, or gives up (`None`).
 fn simplify(finest: &Mesh, target: usize) -> Option<LodMesh> {
     let positions: Vec<[f32; 3]> = finest.vertices.iter().map(|v| v.position).collect();
     let mut error = 0.0f32;
-    let mut indices = meshopt::simplify_decoder(
-        &finest.indices,
-        &positions,
-        target * 3,
-        f32::MAX,
-        meshopt::SimplifyOptions::ErrorAbsolute,
-        Some(&mut error),
-    );
+    let mut indices = if finest.has_uvs() {
+        let uvs: Vec<f32> = finest.uvs.iter().flatten().copied().collect();
+        meshopt::simplify_with_attributes_and_locks_decoder(
+            &finest.indices,
+            &positions,
+            &uvs,
+            &[UV_WEIGHT, UV_WEIGHT],
+            8,
+            &vec![false; positions.len()],
+            target * 3,
+            f32::MAX,
+            meshopt::SimplifyOptions::ErrorAbsolute,
+            Some(&mut error),
+        )
+    } else {
+        meshopt::simplify_decoder(
+            &finest.indices,
+            &positions,
+            target * 3,
+            f32::MAX,
+            meshopt::SimplifyOptions::ErrorAbsolute,
+            Some(&mut error),
+        )
+    };
     if indices.len() / 3 > target {
         indices = meshopt::simplify_sloppy_decoder(
             &finest.indices,
@@ -93,21 +154,20 @@ fn simplify(finest: &Mesh, target: usize) -> Option<LodMesh> {
     if tris == 0 || tris > target {
         return None;
     }
-    let vertices = meshopt::optimize_vertex_fetch(&mut indices, &finest.vertices);
+    let mesh = reorder(finest, indices, |i, v| meshopt::optimize_vertex_fetch(i, v));
     Some(LodMesh {
-        mesh: optimize(Mesh { vertices, indices }),
+        mesh: optimize(mesh),
         error,
     })
 }
 
 /// Reorders triangles for the post-transform cache and vertices for fetch locality.
-fn optimize(mut mesh: Mesh) -> Mesh {
+fn optimize(mesh: Mesh) -> Mesh {
     if mesh.indices.is_empty() {
         return mesh;
     }
-    mesh.indices = meshopt::optimize_vertex_cache(&mesh.indices, mesh.vertices.len());
-    mesh.vertices = meshopt::optimize_vertex_fetch(&mut mesh.indices, &mesh.vertices);
-    mesh
+    let indices = meshopt::optimize_vertex_cache(&mesh.indices, mesh.vertices.len());
+    reorder(&mesh, indices, |i, v| meshopt::optimize_vertex_fetch(i, v))
 }
 
 /// The bounding box as 12 flat-shaded triangles in the mesh's area-weighted average colour
@@ -285,6 +345,7 @@ mod tests {
             ]
             .concat(),
             indices: (0..6).collect(),
+            uvs: Vec::new(),
         };
         let c = average_color_box(&two).vertices[0].color_f32();
         let near = |a: f32, b: f32| (a - b).abs() < 1.0 / 255.0;
@@ -292,6 +353,52 @@ mod tests {
             near(c[0], 0.75) && near(c[1], 0.0) && near(c[2], 0.25),
             "{c:?}"
         );
+    }
+
+    #[test]
+    fn textured_lods_keep_their_coordinates_and_seams() {
+        // The sphere's seam: column 0 and column 2n share positions, at u = 0 and u = 1.
+        let n = 32;
+        let mut s = sphere(n);
+        s.uvs = (0..=n)
+            .flat_map(|i| {
+                (0..=2 * n).map(move |j| [j as f32 / (2 * n) as f32, i as f32 / n as f32])
+            })
+            .collect();
+        let key = |p: [f32; 3], uv: [f32; 2]| (p.map(f32::to_bits), uv.map(f32::to_bits));
+        let source: std::collections::HashSet<_> = s
+            .vertices
+            .iter()
+            .zip(&s.uvs)
+            .map(|(v, uv)| key(v.position, *uv))
+            .collect();
+        let lods = complete_lods(vec![s]);
+        assert!(lods.len() >= 4, "{} LODs", lods.len());
+        let (boxed, simplified) = lods.split_last().unwrap();
+        assert!(
+            !boxed.mesh.has_uvs(),
+            "the box is drawn in the average colour"
+        );
+        for (k, l) in simplified.iter().enumerate() {
+            let m = &l.mesh;
+            m.validate().expect("valid");
+            assert_eq!(m.uvs.len(), m.vertices.len(), "LOD {k}");
+            // Every vertex keeps the coordinate it had at its position (nothing invented), and
+            // the seam is still there.
+            for (v, uv) in m.vertices.iter().zip(&m.uvs) {
+                assert!(source.contains(&key(v.position, *uv)), "LOD {k}: {uv:?}");
+            }
+            let on_seam = |u: f32| {
+                m.vertices
+                    .iter()
+                    .zip(&m.uvs)
+                    .any(|(v, uv)| uv[0] == u && v.position[0] > 0.1)
+            };
+            // (The coarsest levels may fall back to the sloppy simplifier, which welds.)
+            if m.triangle_count() >= 500 {
+                assert!(on_seam(0.0) && on_seam(1.0), "LOD {k} lost its seam");
+            }
+        }
     }
 
     #[test]

@@ -2,20 +2,24 @@
 //! with one or more LODs, shared by instances (Funkhouser §3.1, Fig. 3.4–3.5).
 
 use crate::geometry::{Aabb, Mesh};
+use crate::texture::{AlphaMode, TextureImage};
 use glam::Mat4;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-/// A surface material. Only the base colour is used today; `texture` leaves room in the format
-/// for a texture segment.
+/// A surface material: its colour (already multiplied into the vertex colours by the
+/// importers), its base-colour texture and how its alpha is used.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Material {
     /// Name from the source file.
     pub name: String,
     /// Linear RGBA base colour, multiplied with the vertex colour.
     pub base_color: [f32; 4],
-    /// Segment id of a texture (reserved; always `None` for now).
+    /// The base-colour texture: an index into [`Model::textures`] (in a database, into
+    /// [`crate::format::Header::textures`]), multiplied with the vertex colour.
     pub texture: Option<u32>,
+    /// How alpha is used (opaque, cut out, blended).
+    pub alpha: AlphaMode,
 }
 
 impl Default for Material {
@@ -24,6 +28,7 @@ impl Default for Material {
             name: "default".into(),
             base_color: [1.0; 4],
             texture: None,
+            alpha: AlphaMode::Opaque,
         }
     }
 }
@@ -88,6 +93,8 @@ pub struct Model {
     pub warnings: Vec<String>,
     /// The rooms the source names (IFC spaces); empty for formats without rooms.
     pub spaces: Vec<Space>,
+    /// Decoded base-colour textures the materials refer to.
+    pub textures: Vec<TextureImage>,
 }
 
 impl Model {
@@ -101,7 +108,13 @@ impl Model {
         let shift = glam::DMat4::from_translation(shift);
         let mat_base = self.materials.len() as u32;
         let def_base = self.defs.len() as u32;
-        self.materials.extend(other.materials);
+        let tex_base = self.textures.len() as u32;
+        self.textures.extend(other.textures);
+        self.materials
+            .extend(other.materials.into_iter().map(|mut m| {
+                m.texture = m.texture.map(|t| t + tex_base);
+                m
+            }));
         self.defs.extend(other.defs.into_iter().map(|mut d| {
             d.material += mat_base;
             d

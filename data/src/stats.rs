@@ -78,6 +78,13 @@ pub struct DbStats {
     pub hierarchy_depth: u64,
     /// Bytes of texture segments (the textured boxes' atlases).
     pub texture_bytes: u64,
+    /// Material textures.
+    pub textures: u64,
+    /// Bytes of the material textures' mip segments (RGBA8; every segment a whole chain).
+    pub mip_bytes: u64,
+    /// Bytes of the material textures' coarse segments: what a first view of every textured
+    /// object costs.
+    pub coarse_mip_bytes: u64,
 }
 
 /// Computes the statistics of an open database (header only; no segment is read).
@@ -155,6 +162,14 @@ pub fn stats(db: &Database) -> DbStats {
         textured_clusters,
         hierarchy_depth,
         texture_bytes: kind_bytes(SegmentKind::Texture),
+        textures: h.textures.len() as u64,
+        mip_bytes: kind_bytes(SegmentKind::Mips),
+        coarse_mip_bytes: h
+            .textures
+            .iter()
+            .filter_map(|t| t.segments.first())
+            .map(|s| s.bytes())
+            .sum(),
         name: h.name.clone(),
         format_version: db.prologue().version,
         flattened: h.flattened,
@@ -282,6 +297,15 @@ impl DbStats {
             ] {
                 s.push_str(&format!("  {name:<28} {mean:>10.2} {max:>8}\n"));
             }
+        }
+        if self.textures > 0 {
+            s.push_str(&format!(
+                "\n  textures {}: {:.1} MB of mip segments ({:.0} % of the file), {:.2} MB of them coarse\n",
+                self.textures,
+                self.mip_bytes as f64 / 1e6,
+                100.0 * self.mip_bytes as f64 / self.file_bytes.max(1) as f64,
+                self.coarse_mip_bytes as f64 / 1e6,
+            ));
         }
         if self.clusters > 0 {
             s.push_str(&format!(

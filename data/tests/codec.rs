@@ -124,6 +124,7 @@ fn quad() -> Mesh {
     Mesh {
         vertices: vec![v(0.0, 0.0), v(3.0, 0.0), v(3.0, 2.0), v(0.0, 2.0)],
         indices: vec![0, 1, 2, 0, 2, 3],
+        uvs: Vec::new(),
     }
 }
 
@@ -153,6 +154,7 @@ fn plain_segments_pass_through_and_compressed_ones_are_not_parsed_raw() {
     let point = Mesh {
         vertices: vec![quad().vertices[0]; 3],
         indices: vec![0, 1, 2],
+        uvs: Vec::new(),
     };
     let back = GeometryView::parse(&decode(&encode(&point)).unwrap())
         .unwrap()
@@ -202,7 +204,11 @@ fn strip(n: u32) -> Mesh {
         .filter(|i| i % w != w - 1)
         .flat_map(|i| [i, i + w, i + 1, i + 1, i + w, i + w + 1])
         .collect();
-    Mesh { vertices, indices }
+    Mesh {
+        vertices,
+        indices,
+        uvs: Vec::new(),
+    }
 }
 
 #[test]
@@ -233,6 +239,7 @@ fn large_meshes_and_repeated_vertices_round_trip() {
     let same = Mesh {
         vertices: vec![quad().vertices[1]; 20_000],
         indices: vec![0, 1, 2],
+        uvs: Vec::new(),
     };
     let packed = encode(&same);
     assert!(packed.len() < 1_000, "{} bytes", packed.len());

@@ -66,6 +66,7 @@ fn model() -> Model {
                 name: "red".into(),
                 base_color: [1.0, 0.0, 0.0, 1.0],
                 texture: None,
+                alpha: Default::default(),
             },
         ],
         defs: vec![
@@ -347,7 +348,7 @@ proptest! {
         let mut rnd = || { x ^= x << 13; x ^= x >> 7; x ^= x << 17; (x % 1000) as f32 / 100.0 };
         let vertices: Vec<Vertex> = (0..n).map(|_| Vertex::new([rnd(), rnd(), rnd()], [0.0, 1.0, 0.0], [0.5, 0.5, 0.5, 1.0])).collect();
         let indices: Vec<u32> = (0..(n / 3) * 3).map(|i| ((i * 7 + seed as usize) % n) as u32).collect();
-        let mesh = Mesh { vertices, indices };
+        let mesh = Mesh { vertices, indices, uvs: Vec::new() };
         let bytes = portico_data::geometry::encode_geometry(&mesh);
         prop_assert_eq!(GeometryView::parse(&bytes).unwrap().to_mesh(), mesh);
     }

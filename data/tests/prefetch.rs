@@ -639,6 +639,7 @@ fn lods(triangles: &[u32]) -> Vec<portico_data::format::LodRecord> {
             triangles: t,
             vertices: t,
             error: 0.0,
+            uv: false,
         })
         .collect()
 }

@@ -21,10 +21,12 @@ mod furniture;
 mod glb;
 
 pub use glb::without_tags;
+pub use textures::with_textures;
 mod layout;
 mod mesh;
 mod rooms;
 mod structure;
+mod textures;
 
 use std::fmt;
 use std::str::FromStr;
@@ -132,6 +134,9 @@ pub enum GenerateError {
     /// Assembling the GLB container failed.
     #[error("cannot write GLB: {0}")]
     Glb(#[from] gltf::Error),
+    /// Painting or placing the textured materials failed.
+    #[error("cannot add textures: {0}")]
+    Texture(String),
 }
 
 /// The kind of a room; drives which room generator furnishes it (Funkhouser §3.1.1).

@@ -9,8 +9,9 @@ use crate::drive::{Ask, Event, Fetcher, Items, drive};
 use crate::net::Remote;
 use portico_data::cells::StabList;
 use portico_data::geometry::Aabb;
+use portico_data::texture::Wrap;
 use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse, SegmentInfo};
-use portico_render::{GpuImpostor, GpuMesh, Uploader};
+use portico_render::{GpuImpostor, GpuMesh, GpuTexture, Uploader};
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use tokio::sync::{mpsc, watch};
@@ -23,6 +24,8 @@ pub enum Payload {
     Stab(Arc<StabList>),
     /// A cluster's textured box, on the GPU.
     Impostor(GpuImpostor),
+    /// A material texture's mip chain, on the GPU.
+    Texture(GpuTexture),
 }
 
 /// One message from the IO stage.
@@ -49,6 +52,8 @@ pub struct Catalogue {
     pub stabs: HashSet<u32>,
     /// Texture segments: the box and atlas tile of the cluster each belongs to.
     pub textures: HashMap<u32, (Aabb, u32)>,
+    /// Material texture segments (mip chains) and how their texture wraps.
+    pub mips: HashMap<u32, [Wrap; 2]>,
     /// Geometry segments by the bytes they occupy decoded (more than their wire length when
     /// compressed): what the IO window and the cache are charged.
     pub decoded: HashMap<u32, u64>,
@@ -117,6 +122,13 @@ impl Http {
                 .upload_impostor(bytes, bounds, *tile)
                 .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
             return Ok(Payload::Impostor(imp));
+        }
+        if let Some(wrap) = self.catalogue.mips.get(&id) {
+            let t = self
+                .uploader
+                .upload_texture(bytes, *wrap)
+                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
+            return Ok(Payload::Texture(t));
         }
         if self.catalogue.stabs.contains(&id) {
             let list = portico_data::format::decode_segment::<StabList>(bytes)

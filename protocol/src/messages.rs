@@ -192,6 +192,9 @@ pub enum NeedKind {
     Geometry,
     /// A cluster's impostor texture (its textured box).
     Texture,
+    /// A material's texture: one mip level and every coarser one (`lod` is the index into the
+    /// texture's segments, coarsest first).
+    Mips,
 }
 
 /// One entry of the lookahead list.

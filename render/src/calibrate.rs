@@ -21,6 +21,8 @@ impl Renderer {
             mesh,
             transform: Mat4::IDENTITY,
             color: [1.0; 4],
+            texture: None,
+            alpha: Default::default(),
         };
         self.render_view_proj(view_proj, &[draw])?; // warm-up: first use compiles state
         counts
@@ -95,6 +97,7 @@ pub(crate) fn unit_quad() -> portico_data::geometry::Mesh {
             corner(-1.0, 1.0),
         ],
         indices: vec![0, 1, 2, 0, 2, 3],
+        uvs: Vec::new(),
     }
 }
 
@@ -109,6 +112,8 @@ pub(crate) fn fill_layers(quad: &GpuMesh, coverage: f32) -> Vec<Draw<'_>> {
                 transform: Mat4::from_translation(Vec3::new(0.0, 0.0, z))
                     * Mat4::from_scale(Vec3::new(s, s, 1.0)),
                 color: [1.0; 4],
+                texture: None,
+                alpha: Default::default(),
             }
         })
         .collect()

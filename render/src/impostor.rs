@@ -49,6 +49,8 @@ impl Painter {
                     mesh: self.meshes.get(&it.key)?,
                     transform: it.transform,
                     color: it.color,
+                    texture: None,
+                    alpha: Default::default(),
                 })
             })
             .collect();

@@ -22,6 +22,7 @@ mod calibrate;
 mod held;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod impostor;
+mod material;
 mod mesh;
 mod pipeline;
 mod readback;
@@ -31,8 +32,10 @@ pub mod sheet;
 pub mod textured;
 
 pub use calibrate::calibrate;
+pub use material::GpuTexture;
 pub use mesh::{GpuMesh, Uploader};
 pub use portico_client::view::Camera;
+pub use portico_data::texture::AlphaMode;
 pub use renderer::Renderer;
 pub use textured::GpuImpostor;
 /// The wgpu this renderer draws with, for callers that give it a surface.
@@ -81,6 +84,9 @@ pub enum RenderError {
     /// The bytes are not a valid geometry segment.
     #[error("invalid geometry segment: {0}")]
     Geometry(String),
+    /// The bytes are not a valid texture segment, or the device cannot hold it.
+    #[error("invalid texture segment: {0}")]
+    Texture(String),
     /// A buffer would exceed the device's maximum buffer size.
     #[error("buffer of {size} bytes exceeds the device limit of {limit} bytes")]
     TooLarge {
@@ -110,8 +116,56 @@ pub struct Draw<'a> {
     pub mesh: &'a GpuMesh,
     /// Object-to-world transform (rigid motion plus uniform scale: normals use its upper 3x3).
     pub transform: Mat4,
-    /// Material base colour (linear RGBA), multiplied with the vertex colours.
+    /// Material base colour (linear RGBA), multiplied with the vertex colours (and the
+    /// texture): a textured object whose texture is not resident passes the texture's average
+    /// colour here.
     pub color: [f32; 4],
+    /// The base-colour texture, sampled at the mesh's coordinates; ignored for a mesh without
+    /// them.
+    pub texture: Option<&'a GpuTexture>,
+    /// How alpha is used: opaque, cut out at a cutoff (textured draws) or blended (drawn after
+    /// every opaque draw, in the order given, without writing depth).
+    pub alpha: AlphaMode,
+}
+
+impl<'a> Draw<'a> {
+    /// An opaque, untextured draw of `mesh`.
+    pub fn new(mesh: &'a GpuMesh, transform: Mat4, color: [f32; 4]) -> Draw<'a> {
+        Draw {
+            mesh,
+            transform,
+            color,
+            texture: None,
+            alpha: AlphaMode::Opaque,
+        }
+    }
+
+    /// The draw of an object the frame decision chose ([`portico_client::frame::Drawn`]): its
+    /// instance's transform, its tint, its texture when `texture` finds that segment resident,
+    /// and its material's alpha mode.
+    pub fn of(
+        header: &portico_data::format::Header,
+        drawn: &portico_client::frame::Drawn,
+        mesh: &'a GpuMesh,
+        texture: impl Fn(u32) -> Option<&'a GpuTexture>,
+    ) -> Draw<'a> {
+        let inst = header.instances.get(drawn.instance as usize);
+        let alpha = inst
+            .and_then(|i| header.materials.get(i.material as usize))
+            .map_or(AlphaMode::Opaque, |m| m.alpha);
+        Draw {
+            mesh,
+            transform: inst.map_or(Mat4::IDENTITY, |i| Mat4::from_cols_array(&i.transform)),
+            color: drawn.tint,
+            texture: drawn.texture.and_then(texture),
+            alpha,
+        }
+    }
+
+    /// Whether this draw samples its texture.
+    pub(crate) fn textured(&self) -> bool {
+        self.texture.is_some() && self.mesh.uv.is_some()
+    }
 }
 
 /// What one frame cost and contained.

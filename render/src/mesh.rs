@@ -2,9 +2,10 @@
 //! for byte, so the cache's byte budget is the segments' decoded size (a compressed segment is
 //! decoded before it gets here).
 
-use crate::{GpuImpostor, RenderError, scoped, textured};
+use crate::{GpuImpostor, GpuTexture, RenderError, scoped, textured};
 use glam::Vec3;
 use portico_data::geometry::{Aabb, GeometryView, Vertex};
+use portico_data::texture::Wrap;
 use std::sync::Arc;
 use wgpu::util::DeviceExt;
 
@@ -14,6 +15,8 @@ use wgpu::util::DeviceExt;
 #[derive(Debug)]
 pub struct GpuMesh {
     pub(crate) vertex: wgpu::Buffer,
+    /// Texture coordinates, for a textured mesh.
+    pub(crate) uv: Option<wgpu::Buffer>,
     pub(crate) index: wgpu::Buffer,
     pub(crate) index_format: wgpu::IndexFormat,
     pub(crate) index_count: u32,
@@ -24,9 +27,14 @@ pub struct GpuMesh {
 }
 
 impl GpuMesh {
-    /// GPU memory held by the vertex and index buffers, in bytes.
+    /// GPU memory held by the vertex, texture-coordinate and index buffers, in bytes.
     pub fn gpu_bytes(&self) -> u64 {
-        self.vertex.size() + self.index.size()
+        self.vertex.size() + self.index.size() + self.uv.as_ref().map_or(0, wgpu::Buffer::size)
+    }
+
+    /// Whether the mesh has texture coordinates.
+    pub fn has_uvs(&self) -> bool {
+        self.uv.is_some()
     }
 
     /// Number of triangles drawn per instance.
@@ -57,6 +65,7 @@ pub struct Uploader {
     pub(crate) device: wgpu::Device,
     pub(crate) queue: wgpu::Queue,
     pub(crate) textured: Arc<textured::Textured>,
+    pub(crate) materials: Arc<crate::material::Materials>,
     pub(crate) held: crate::held::Held,
 }
 
@@ -64,6 +73,18 @@ impl Uploader {
     /// Same as [`crate::Renderer::upload`].
     pub fn upload(&self, segment_bytes: &[u8]) -> Result<GpuMesh, RenderError> {
         upload_segment(&self.device, &self.held, segment_bytes)
+    }
+
+    /// Same as [`crate::Renderer::upload_texture`].
+    pub fn upload_texture(
+        &self,
+        segment: &[u8],
+        wrap: [Wrap; 2],
+    ) -> Result<GpuTexture, RenderError> {
+        scoped(&self.device, || {
+            self.materials
+                .upload(&self.device, &self.queue, &self.held, segment, wrap)
+        })?
     }
 
     /// Same as [`crate::Renderer::upload_impostor`].
@@ -90,13 +111,14 @@ pub(crate) fn upload_segment(
     let limit = device.limits().max_buffer_size;
     for size in [
         view.vertex_bytes.len() as u64,
+        view.uv_bytes.len() as u64,
         view.index_bytes.len() as u64,
     ] {
         if size > limit {
             return Err(RenderError::TooLarge { size, limit });
         }
     }
-    let (vertex, index) = scoped(device, || {
+    let (vertex, index, uv) = scoped(device, || {
         (
             buffer_init(
                 device,
@@ -110,6 +132,14 @@ pub(crate) fn upload_segment(
                 view.index_bytes,
                 wgpu::BufferUsages::INDEX,
             ),
+            (!view.uv_bytes.is_empty()).then(|| {
+                buffer_init(
+                    device,
+                    "texture coordinates",
+                    view.uv_bytes,
+                    wgpu::BufferUsages::VERTEX,
+                )
+            }),
         )
     })?;
     let index_format = if view.wide_indices() {
@@ -118,8 +148,9 @@ pub(crate) fn upload_segment(
         wgpu::IndexFormat::Uint16
     };
     Ok(GpuMesh {
-        _held: held.charge(vertex.size() + index.size()),
+        _held: held.charge(vertex.size() + index.size() + uv.as_ref().map_or(0, |b| b.size())),
         vertex,
+        uv,
         index,
         index_format,
         index_count: view.header.index_count,

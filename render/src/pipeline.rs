@@ -13,12 +13,14 @@ pub(crate) struct Globals {
     pub(crate) ambient: [f32; 4],
 }
 
-/// Per-draw instance attributes (locations 3..=7); 80 bytes.
+/// Per-draw instance attributes (locations 3..=8); 96 bytes.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub(crate) struct InstanceData {
     pub(crate) model: [[f32; 4]; 4],
     pub(crate) color: [f32; 4],
+    /// x: alpha cutoff of a cut-out material (0: none); y, z, w: zero.
+    pub(crate) params: [f32; 4],
 }
 
 /// The offscreen targets and the buffer frames are read back through: frames are drawn into
@@ -120,12 +122,17 @@ pub(crate) fn globals_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
 
 pub(crate) const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
     wgpu::vertex_attr_array![0 => Float32x3, 1 => Snorm8x4, 2 => Unorm8x4];
-pub(crate) const INSTANCE_ATTRIBUTES: [wgpu::VertexAttribute; 5] = wgpu::vertex_attr_array![
-    3 => Float32x4, 4 => Float32x4, 5 => Float32x4, 6 => Float32x4, 7 => Float32x4
+pub(crate) const INSTANCE_ATTRIBUTES: [wgpu::VertexAttribute; 6] = wgpu::vertex_attr_array![
+    3 => Float32x4, 4 => Float32x4, 5 => Float32x4, 6 => Float32x4, 7 => Float32x4,
+    8 => Float32x4
 ];
+/// A textured mesh's coordinates (vertex buffer 2).
+pub(crate) const UV_ATTRIBUTES: [wgpu::VertexAttribute; 1] =
+    wgpu::vertex_attr_array![9 => Float32x2];
 
-pub(crate) fn vertex_layouts() -> [Option<wgpu::VertexBufferLayout<'static>>; 2] {
-    [
+/// Vertex buffers 0 (vertices) and 1 (instances), and 2 (texture coordinates) when `textured`.
+pub(crate) fn vertex_layouts(textured: bool) -> Vec<Option<wgpu::VertexBufferLayout<'static>>> {
+    let mut out = vec![
         Some(wgpu::VertexBufferLayout {
             array_stride: std::mem::size_of::<Vertex>() as u64,
             step_mode: wgpu::VertexStepMode::Vertex,
@@ -136,7 +143,15 @@ pub(crate) fn vertex_layouts() -> [Option<wgpu::VertexBufferLayout<'static>>; 2]
             step_mode: wgpu::VertexStepMode::Instance,
             attributes: &INSTANCE_ATTRIBUTES,
         }),
-    ]
+    ];
+    if textured {
+        out.push(Some(wgpu::VertexBufferLayout {
+            array_stride: 8,
+            step_mode: wgpu::VertexStepMode::Vertex,
+            attributes: &UV_ATTRIBUTES,
+        }));
+    }
+    out
 }
 
 /// The one pipeline: depth-tested opaque triangles, no culling (building models are often
@@ -152,7 +167,7 @@ pub(crate) fn create_pipeline(
         bind_group_layouts: &[Some(globals)],
         immediate_size: 0,
     });
-    let buffers = vertex_layouts();
+    let buffers = vertex_layouts(false);
     opaque_pipeline(
         device,
         "walkthrough",
@@ -162,6 +177,70 @@ pub(crate) fn create_pipeline(
         None,
         samples,
     )
+}
+
+/// How a surface pipeline treats what it draws over.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Blending {
+    /// Opaque (cut-outs included): depth written.
+    Opaque,
+    /// Blended over what is behind: depth tested, not written.
+    Over,
+}
+
+/// A pipeline of depth-tested triangles from `shader`'s `entries` (vertex, fragment) into the
+/// one colour target; `cull_mode` as the geometry's winding allows; `samples` per pixel as the
+/// targets have.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn surface_pipeline(
+    device: &wgpu::Device,
+    label: &str,
+    layout: &wgpu::PipelineLayout,
+    shader: &wgpu::ShaderModule,
+    entries: (&str, &str),
+    buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
+    cull_mode: Option<wgpu::Face>,
+    samples: u32,
+    blending: Blending,
+) -> wgpu::RenderPipeline {
+    let over = blending == Blending::Over;
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module: shader,
+            entry_point: Some(entries.0),
+            compilation_options: Default::default(),
+            buffers,
+        },
+        primitive: wgpu::PrimitiveState {
+            cull_mode,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(!over),
+            depth_compare: Some(wgpu::CompareFunction::Less),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: wgpu::MultisampleState {
+            count: samples,
+            ..Default::default()
+        },
+        fragment: Some(wgpu::FragmentState {
+            module: shader,
+            entry_point: Some(entries.1),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format: COLOR_FORMAT,
+                blend: over.then_some(wgpu::BlendState::ALPHA_BLENDING),
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
 }
 
 /// A pipeline of depth-tested opaque triangles from `shader`'s `vs_main` and `fs_main` into the
@@ -176,37 +255,15 @@ pub(crate) fn opaque_pipeline(
     cull_mode: Option<wgpu::Face>,
     samples: u32,
 ) -> wgpu::RenderPipeline {
-    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-        label: Some(label),
-        layout: Some(layout),
-        vertex: wgpu::VertexState {
-            module: shader,
-            entry_point: Some("vs_main"),
-            compilation_options: Default::default(),
-            buffers,
-        },
-        primitive: wgpu::PrimitiveState {
-            cull_mode,
-            ..Default::default()
-        },
-        depth_stencil: Some(wgpu::DepthStencilState {
-            format: DEPTH_FORMAT,
-            depth_write_enabled: Some(true),
-            depth_compare: Some(wgpu::CompareFunction::Less),
-            stencil: Default::default(),
-            bias: Default::default(),
-        }),
-        multisample: wgpu::MultisampleState {
-            count: samples,
-            ..Default::default()
-        },
-        fragment: Some(wgpu::FragmentState {
-            module: shader,
-            entry_point: Some("fs_main"),
-            compilation_options: Default::default(),
-            targets: &[Some(COLOR_FORMAT.into())],
-        }),
-        multiview_mask: None,
-        cache: None,
-    })
+    surface_pipeline(
+        device,
+        label,
+        layout,
+        shader,
+        ("vs_main", "fs_main"),
+        buffers,
+        cull_mode,
+        samples,
+        Blending::Opaque,
+    )
 }

@@ -7,7 +7,8 @@ use crate::pipeline::{
     globals_layout,
 };
 use crate::{
-    Camera, Draw, FrameTiming, GpuImpostor, INITIAL_INSTANCES, RenderError, SKY_COLOR, textured,
+    AlphaMode, Camera, Draw, FrameTiming, GpuImpostor, GpuTexture, INITIAL_INSTANCES, RenderError,
+    SKY_COLOR, textured,
 };
 use glam::{Mat4, Vec3};
 use portico_data::geometry::Aabb;
@@ -32,6 +33,7 @@ pub struct Renderer {
     pub(crate) ambient: f32,
     pub(crate) has_frame: bool,
     pub(crate) textured: Arc<textured::Textured>,
+    pub(crate) materials: Arc<crate::material::Materials>,
     pub(crate) clear: wgpu::Color,
     pub(crate) samples: u32,
     pub(crate) held: crate::held::Held,
@@ -110,6 +112,7 @@ impl Renderer {
         let instances = create_instance_buffer(&device, INITIAL_INSTANCES);
         let targets = create_targets(&device, width, height, samples)?;
         let textured = Arc::new(textured::Textured::new(&device, &layout, samples));
+        let materials = Arc::new(crate::material::Materials::new(&device, &layout, samples));
         tracing::info!(adapter = %info.name, backend = ?info.backend, width, height, samples, "renderer ready");
         Ok(Renderer {
             _instance: instance,
@@ -127,6 +130,7 @@ impl Renderer {
             ambient: 0.35,
             has_frame: false,
             textured,
+            materials,
             clear: SKY_COLOR,
             samples,
             held: Default::default(),
@@ -157,6 +161,20 @@ impl Renderer {
         tile: u32,
     ) -> Result<GpuImpostor, RenderError> {
         self.uploader().upload_impostor(png, bounds, tile)
+    }
+
+    /// Uploads a texture segment ([`portico_data::texture`]: a mip chain) to be sampled with
+    /// `wrap` along u and v.
+    ///
+    /// # Errors
+    /// [`RenderError::Texture`] for bytes that are not a texture segment or a texture larger
+    /// than the device allows.
+    pub fn upload_texture(
+        &self,
+        segment: &[u8],
+        wrap: [portico_data::texture::Wrap; 2],
+    ) -> Result<GpuTexture, RenderError> {
+        self.uploader().upload_texture(segment, wrap)
     }
 
     /// GPU memory held now by the meshes and impostor boxes this renderer and its uploaders
@@ -223,6 +241,7 @@ impl Renderer {
             device: self.device.clone(),
             queue: self.queue.clone(),
             textured: self.textured.clone(),
+            materials: self.materials.clone(),
             held: self.held.clone(),
         }
     }
@@ -425,6 +444,15 @@ impl Renderer {
             .map(|d| InstanceData {
                 model: d.transform.to_cols_array_2d(),
                 color: d.color,
+                params: [
+                    match d.alpha {
+                        AlphaMode::Mask(c) => c.max(1e-3),
+                        _ => 0.0,
+                    },
+                    0.0,
+                    0.0,
+                    0.0,
+                ],
             })
             .collect();
         if !data.is_empty() {
@@ -434,38 +462,82 @@ impl Renderer {
         Ok(())
     }
 
-    /// Records one instanced draw per non-empty mesh, then the textured boxes, into an open
-    /// pass.
+    /// Records one instanced draw per non-empty mesh — plain opaque ones, then textured and
+    /// cut-out ones, then the textured boxes, then blended ones in the order given — into an
+    /// open pass.
     fn encode_draws(
         &self,
         pass: &mut wgpu::RenderPass<'_>,
         draws: &[Draw<'_>],
         boxes: &[&GpuImpostor],
     ) -> FrameTiming {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.set_vertex_buffer(1, self.instances.slice(..));
         let mut timing = FrameTiming::default();
-        let mut bound: Option<&GpuMesh> = None;
-        for (i, d) in (0u32..).zip(draws) {
-            if d.mesh.index_count == 0 {
-                continue;
-            }
-            if !bound.is_some_and(|b| std::ptr::eq(b, d.mesh)) {
-                pass.set_vertex_buffer(0, d.mesh.vertex.slice(..));
-                pass.set_index_buffer(d.mesh.index.slice(..), d.mesh.index_format);
-                bound = Some(d.mesh);
-            }
-            pass.draw_indexed(0..d.mesh.index_count, 0, i..i + 1);
-            timing.triangles += u64::from(d.mesh.triangles());
-            timing.vertices += u64::from(d.mesh.vertex_count);
-            timing.draws += 1;
-        }
+        let blended = |d: &Draw<'_>| d.alpha == AlphaMode::Blend;
+        let m = &self.materials;
+        self.encode_group(pass, draws, &mut timing, |d| {
+            (!blended(d) && !d.textured()).then_some(&self.pipeline)
+        });
+        self.encode_group(pass, draws, &mut timing, |d| {
+            (!blended(d) && d.textured()).then_some(&m.textured)
+        });
         self.textured.draw(pass, &self.bind_group, boxes);
+        self.encode_group(pass, draws, &mut timing, |d| {
+            blended(d).then_some(if d.textured() {
+                &m.textured_over
+            } else {
+                &m.plain_over
+            })
+        });
         timing.triangles += 12 * boxes.len() as u64;
         timing.vertices += 24 * boxes.len() as u64;
         timing.draws += boxes.len() as u32;
         timing
+    }
+
+    /// Records, in order, the draws `pipeline_of` gives a pipeline, each with it (a textured
+    /// one binds the draw's texture and coordinates); instance `i` is the draw's index in the
+    /// frame's draws.
+    fn encode_group<'p>(
+        &'p self,
+        pass: &mut wgpu::RenderPass<'_>,
+        draws: &[Draw<'_>],
+        timing: &mut FrameTiming,
+        pipeline_of: impl Fn(&Draw<'_>) -> Option<&'p wgpu::RenderPipeline>,
+    ) {
+        let mut current: Option<&wgpu::RenderPipeline> = None;
+        let mut bound: Option<&GpuMesh> = None;
+        let mut texture: Option<&GpuTexture> = None;
+        for (i, d) in (0u32..).zip(draws) {
+            let Some(pipeline) = pipeline_of(d).filter(|_| d.mesh.index_count > 0) else {
+                continue;
+            };
+            if !current.is_some_and(|c| std::ptr::eq(c, pipeline)) {
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, &self.bind_group, &[]);
+                pass.set_vertex_buffer(1, self.instances.slice(..));
+                current = Some(pipeline);
+                (bound, texture) = (None, None);
+            }
+            let instance = i;
+            if !bound.is_some_and(|b| std::ptr::eq(b, d.mesh)) {
+                pass.set_vertex_buffer(0, d.mesh.vertex.slice(..));
+                pass.set_index_buffer(d.mesh.index.slice(..), d.mesh.index_format);
+                if let (true, Some(uv)) = (d.textured(), &d.mesh.uv) {
+                    pass.set_vertex_buffer(2, uv.slice(..));
+                }
+                bound = Some(d.mesh);
+            }
+            if let Some(t) = d.texture.filter(|_| d.textured())
+                && !texture.is_some_and(|b| std::ptr::eq(b, t))
+            {
+                pass.set_bind_group(1, &t.bind_group, &[]);
+                texture = Some(t);
+            }
+            pass.draw_indexed(0..d.mesh.index_count, 0, instance..instance + 1);
+            timing.triangles += u64::from(d.mesh.triangles());
+            timing.vertices += u64::from(d.mesh.vertex_count);
+            timing.draws += 1;
+        }
     }
 
     /// A pass that clears and draws into the multisampled target resolved into `target`, or

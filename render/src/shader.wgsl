@@ -1,6 +1,7 @@
-// Portico walkthrough shader (client/src/render.rs): per-vertex colour times a per-draw material
-// colour, lit by one directional light plus ambient. Lighting is two-sided (|n·l|) because
-// building models are drawn without back-face culling.
+// Portico walkthrough shader (render/src/renderer.rs): per-vertex colour times a per-draw material
+// colour (times the base-colour texture for textured meshes: vs_textured / fs_textured), lit by
+// one directional light plus ambient. Lighting is two-sided (|n·l|) because building models are
+// drawn without back-face culling.
 
 struct Globals {
     view_proj: mat4x4<f32>,
@@ -42,13 +43,64 @@ fn vs_main(v: VertexIn) -> VertexOut {
     return out;
 }
 
-@fragment
-fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
-    let len2 = dot(in.normal, in.normal);
+fn shade(normal: vec3<f32>) -> f32 {
+    let len2 = dot(normal, normal);
     let has_normal = len2 > 1e-12;
-    let n = in.normal * inverseSqrt(select(1.0, len2, has_normal));
+    let n = normal * inverseSqrt(select(1.0, len2, has_normal));
     let diffuse = select(1.0, abs(dot(n, globals.light_dir.xyz)), has_normal);
     let ambient = globals.ambient.x;
-    let shade = ambient + (1.0 - ambient) * diffuse;
-    return vec4<f32>(in.color.rgb * shade, in.color.a);
+    return ambient + (1.0 - ambient) * diffuse;
+}
+
+@fragment
+fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+    return vec4<f32>(in.color.rgb * shade(in.normal), in.color.a);
+}
+
+// Textured meshes: the base-colour texture (group 1) at the mesh's coordinates (location 9),
+// mip-mapped; texels under a cut-out material's cutoff (location 8, x; 0 = none) are dropped.
+@group(1) @binding(0) var base_color: texture_2d<f32>;
+@group(1) @binding(1) var base_sampler: sampler;
+
+struct TexturedIn {
+    @location(0) position: vec3<f32>,
+    @location(1) normal: vec4<f32>,
+    @location(2) color: vec4<f32>,
+    @location(3) model_0: vec4<f32>,
+    @location(4) model_1: vec4<f32>,
+    @location(5) model_2: vec4<f32>,
+    @location(6) model_3: vec4<f32>,
+    @location(7) tint: vec4<f32>,
+    @location(8) params: vec4<f32>,
+    @location(9) uv: vec2<f32>,
+};
+
+struct TexturedOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) normal: vec3<f32>,
+    @location(1) color: vec4<f32>,
+    @location(2) uv: vec2<f32>,
+    @location(3) cutoff: f32,
+};
+
+@vertex
+fn vs_textured(v: TexturedIn) -> TexturedOut {
+    let model = mat4x4<f32>(v.model_0, v.model_1, v.model_2, v.model_3);
+    var out: TexturedOut;
+    out.clip = globals.view_proj * (model * vec4<f32>(v.position, 1.0));
+    out.normal = mat3x3<f32>(v.model_0.xyz, v.model_1.xyz, v.model_2.xyz) * v.normal.xyz;
+    out.color = v.color * v.tint;
+    out.uv = v.uv;
+    out.cutoff = v.params.x;
+    return out;
+}
+
+@fragment
+fn fs_textured(in: TexturedOut) -> @location(0) vec4<f32> {
+    let c = in.color * textureSample(base_color, base_sampler, in.uv);
+    if (in.cutoff > 0.0 && c.a < in.cutoff) {
+        discard;
+    }
+    let alpha = select(c.a, 1.0, in.cutoff > 0.0);
+    return vec4<f32>(c.rgb * shade(in.normal), alpha);
 }

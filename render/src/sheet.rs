@@ -146,12 +146,16 @@ pub fn birdseye(r: &mut Renderer, db: &Database, path: &CameraPath) -> Result<Bi
             mesh: m,
             transform: *t,
             color: *c,
+            texture: None,
+            alpha: Default::default(),
         })
         .collect();
     draws.extend(marks.iter().map(|(t, c)| Draw {
         mesh: &marker,
         transform: *t,
         color: *c,
+        texture: None,
+        alpha: Default::default(),
     }));
     let (view_proj, half_w) = top_down(db, cut, r.aspect());
     let image = r

@@ -39,6 +39,7 @@ fn square(half: f32) -> Mesh {
     Mesh {
         vertices: vec![v(-1.0, -1.0), v(1.0, -1.0), v(1.0, 1.0), v(-1.0, 1.0)],
         indices: vec![0, 1, 2, 0, 2, 3],
+        uvs: Vec::new(),
     }
 }
 
@@ -47,6 +48,8 @@ fn at(mesh: &GpuMesh, offset: Vec3, color: [f32; 4]) -> Draw<'_> {
         mesh,
         transform: Mat4::from_translation(offset),
         color,
+        texture: None,
+        alpha: Default::default(),
     }
 }
 
@@ -255,6 +258,7 @@ fn door_seam(samples: u32, picture: bool) -> (i32, u32, u32) {
     let mut door = Mesh {
         vertices: vec![],
         indices: vec![],
+        uvs: Vec::new(),
     };
     cuboid(
         &mut door,

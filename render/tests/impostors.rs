@@ -108,6 +108,8 @@ fn a_textured_box_seen_from_a_capture_direction_matches_its_objects() {
                 mesh: m,
                 transform: Mat4::from_cols_array(&inst.transform),
                 color: *color,
+                texture: None,
+                alpha: Default::default(),
             })
             .collect();
         r.render_view_proj(vp, &draws).unwrap();

@@ -1,4 +1,4 @@
-//! `portico generate --preset tiny|small|soda|mega [--seed N] [--floors F] [--untagged] -o building.glb`
+//! `portico generate --preset tiny|small|soda|mega [--seed N] [--floors F] [--untagged] [--textured] -o building.glb`
 
 use crate::cmd::values;
 use crate::progress::Bars;
@@ -24,6 +24,10 @@ pub struct Args {
     /// modelling tool's export would: `build` must then find the walls and slabs itself.
     #[arg(long)]
     untagged: bool,
+    /// Give walls, floors and furniture textured materials (procedural brick, wood, carpet and
+    /// tile PNGs in the GLB, box-mapped coordinates), to measure streaming with textures.
+    #[arg(long)]
+    textured: bool,
     /// Output GLB file.
     #[arg(
         short = 'o',
@@ -53,11 +57,13 @@ pub fn run(a: Args) -> Result<()> {
     })
     .with_context(|| format!("generating the {} preset", a.preset))?;
     bars.finish();
-    let glb = if a.untagged {
-        portico_generator::without_tags(&building.glb).context("removing the tags")?
-    } else {
-        building.glb
-    };
+    let mut glb = building.glb;
+    if a.textured {
+        glb = portico_generator::with_textures(&glb).context("adding textures")?;
+    }
+    if a.untagged {
+        glb = portico_generator::without_tags(&glb).context("removing the tags")?;
+    }
     write_atomically(&a.output, &glb)?;
     let s = &building.stats;
     eprintln!(

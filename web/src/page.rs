@@ -159,6 +159,11 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         .as_ref()
         .map(|c| c.stab_segments.iter().copied().collect())
         .unwrap_or_default();
+    let mips = header
+        .textures
+        .iter()
+        .flat_map(|t| t.segments.iter().map(move |s| (s.segment, t.wrap)))
+        .collect();
     let catalogue = Catalogue {
         segments: manifest.segments,
         decoded: header.decoded_sizes().collect(),
@@ -257,6 +262,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
             graph,
             bounds,
             stabs,
+            mips,
             tour,
         },
     };

@@ -5,7 +5,7 @@
 
 use crate::input::Input;
 use crate::io::{Arrival, Io};
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use portico_client::cache::ObjectCache;
 use portico_client::cost::CostModel;
 use portico_client::elision::Algorithm;
@@ -17,7 +17,7 @@ use portico_data::format::Header;
 use portico_data::geometry::Aabb;
 use portico_data::path::CameraPath;
 use portico_protocol::Observer;
-use portico_render::{Draw, GpuMesh, Renderer};
+use portico_render::{Draw, GpuMesh, GpuTexture, Renderer};
 use serde::Serialize;
 use std::sync::Arc;
 
@@ -32,6 +32,7 @@ pub const TURN: f32 = 2.0;
 pub enum Resident {
     Mesh(GpuMesh),
     Stab(Arc<StabList>),
+    Texture(GpuTexture),
 }
 
 /// The model as the manifest describes it.
@@ -40,6 +41,8 @@ pub struct Model {
     pub graph: Option<CellGraph>,
     pub bounds: Vec<Aabb>,
     pub stabs: std::collections::HashSet<u32>,
+    /// Material texture segments (mip chains) and how their texture wraps.
+    pub mips: std::collections::HashMap<u32, [portico_data::texture::Wrap; 2]>,
     /// The model's standard tour (or orbit and fly-through), where the view starts.
     pub tour: Option<CameraPath>,
 }
@@ -141,6 +144,14 @@ impl Viewer {
                     let made = if self.model.stabs.contains(&id) {
                         portico_data::format::decode_segment::<StabList>(&bytes)
                             .map(|l| (Resident::Stab(Arc::new(l)), bytes.len() as u64))
+                            .map_err(|e| format!("segment {id}: {e}"))
+                    } else if let Some(wrap) = self.model.mips.get(&id) {
+                        self.renderer
+                            .upload_texture(&bytes, *wrap)
+                            .map(|t| {
+                                let charge = t.gpu_bytes().max(bytes.len() as u64);
+                                (Resident::Texture(t), charge)
+                            })
                             .map_err(|e| format!("segment {id}: {e}"))
                     } else {
                         // A compressed segment is decoded here (the page has one thread),
@@ -290,16 +301,11 @@ impl Viewer {
         for o in &d.drawn {
             if let Some(Resident::Mesh(mesh)) = self.cache.get(o.segment) {
                 self.drawn.push(o.instance);
-                let inst = &header.instances[o.instance as usize];
-                let color = header
-                    .materials
-                    .get(inst.material as usize)
-                    .map_or([1.0; 4], |m| m.base_color);
-                draws.push(Draw {
-                    mesh,
-                    transform: Mat4::from_cols_array(&inst.transform),
-                    color,
-                });
+                let cache = &self.cache;
+                draws.push(Draw::of(header, o, mesh, |s| match cache.get(s) {
+                    Some(Resident::Texture(t)) => Some(t),
+                    _ => None,
+                }));
             }
         }
         let frame = match self.surface.get_current_texture() {

@@ -427,7 +427,11 @@ mod tests {
             let j = (i + 1) % 8;
             indices.extend([i, j, 8 + j, i, 8 + j, 8 + i]);
         }
-        Mesh { vertices, indices }
+        Mesh {
+            vertices,
+            indices,
+            uvs: Vec::new(),
+        }
     }
 
     #[test]
@@ -503,7 +507,11 @@ mod tests {
                 ]);
             }
         }
-        Mesh { vertices, indices }
+        Mesh {
+            vertices,
+            indices,
+            uvs: Vec::new(),
+        }
     }
 
     #[test]

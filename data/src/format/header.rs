@@ -4,6 +4,7 @@
 use super::{SegmentEntry, SegmentKind};
 use crate::geometry::Aabb;
 use crate::model::Material;
+use crate::texture::TextureRecord;
 use serde::{Deserialize, Serialize};
 
 /// The decoded header of a display database.
@@ -23,6 +24,8 @@ pub struct Header {
     pub origin: [f64; 3],
     /// Materials (index 0 is the default).
     pub materials: Vec<Material>,
+    /// Base-colour textures, their mip segments coarsest first ([`crate::texture`]).
+    pub textures: Vec<TextureRecord>,
     /// Object definitions.
     pub objects: Vec<ObjectRecord>,
     /// Object instances.
@@ -57,6 +60,8 @@ pub struct LodRecord {
     pub vertices: u32,
     /// Geometric error (metres) against the finest LOD: the benefit's accuracy term uses it.
     pub error: f32,
+    /// Whether the segment carries texture coordinates ([`crate::geometry::GEOMETRY_UV`]).
+    pub uv: bool,
 }
 
 /// An object definition.
@@ -70,6 +75,9 @@ pub struct ObjectRecord {
     pub material: u32,
     /// LODs, finest first.
     pub lods: Vec<LodRecord>,
+    /// How many times the texture repeats across the object ([`crate::geometry::Mesh::uv_span`]
+    /// of its finest LOD; 0 without texture coordinates).
+    pub uv_span: f32,
 }
 
 /// A placed object.
@@ -115,7 +123,7 @@ impl Header {
             .map(|l| {
                 (
                     l.segment,
-                    crate::geometry::plain_size(l.vertices, l.triangles),
+                    crate::geometry::plain_size(l.vertices, l.triangles, l.uv),
                 )
             })
     }
@@ -129,6 +137,12 @@ impl Header {
                 .get(inst.object as usize)
                 .map_or(&[], |o| &o.lods),
         }
+    }
+
+    /// The texture an instance is drawn with, if its material has one.
+    pub fn texture_of(&self, inst: &InstanceRecord) -> Option<&TextureRecord> {
+        let m = self.materials.get(inst.material as usize)?;
+        self.textures.get(m.texture? as usize)
     }
 
     /// Checks every cross-reference against the segment index, so later lookups cannot fail.
@@ -151,6 +165,32 @@ impl Header {
             }
             Ok(())
         };
+        for (i, m) in self.materials.iter().enumerate() {
+            if let Some(t) = m.texture.filter(|&t| t as usize >= self.textures.len()) {
+                return Err(format!(
+                    "material {i} has texture {t} of {}",
+                    self.textures.len()
+                ));
+            }
+        }
+        for (i, t) in self.textures.iter().enumerate() {
+            if t.segments.is_empty() {
+                return Err(format!("texture {i} has no segments"));
+            }
+            for s in &t.segments {
+                let seg = segments.get(s.segment as usize).ok_or_else(|| {
+                    format!("texture {i} refers to missing segment {}", s.segment)
+                })?;
+                if SegmentKind::from_u16(seg.kind) != Some(SegmentKind::Mips)
+                    || seg.raw_length != s.bytes()
+                {
+                    return Err(format!(
+                        "texture {i}'s segment {} has the wrong kind or size",
+                        s.segment
+                    ));
+                }
+            }
+        }
         for (i, o) in self.objects.iter().enumerate() {
             // A flattened database may leave definitions without shared geometry.
             if !o.lods.is_empty() {

@@ -27,7 +27,7 @@ use bytemuck::{Pod, Zeroable};
 /// First eight bytes of every display database.
 pub const MAGIC: [u8; 8] = *b"PORTICO\0";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 3;
+pub const FORMAT_VERSION: u32 = 4;
 /// Size of the prologue; the first segment starts here.
 pub const PROLOGUE_SIZE: usize = 128;
 /// Minimum alignment of every segment.
@@ -51,6 +51,9 @@ pub enum SegmentKind {
     Texture = 4,
     /// The occluder faces the cells were built from (used by `portico verify`).
     Occluders = 5,
+    /// A material's texture: RGBA8 mip levels, one level and every coarser one
+    /// ([`crate::texture`]).
+    Mips = 6,
 }
 
 impl SegmentKind {
@@ -62,6 +65,7 @@ impl SegmentKind {
             3 => SegmentKind::StabList,
             4 => SegmentKind::Texture,
             5 => SegmentKind::Occluders,
+            6 => SegmentKind::Mips,
             _ => return None,
         })
     }

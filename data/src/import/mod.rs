@@ -9,6 +9,7 @@
 
 pub mod gltf;
 pub mod ifc;
+pub mod image;
 pub mod obj;
 
 use crate::error::{DataError, Result};
@@ -110,7 +111,11 @@ pub fn mesh_from_streams(
             Vertex::new(*p, normals[i], c)
         })
         .collect();
-    Ok(Mesh { vertices, indices })
+    Ok(Mesh {
+        vertices,
+        indices,
+        uvs: Vec::new(),
+    })
 }
 
 /// Whether a given normal can be used: finite and not (nearly) zero.
@@ -133,13 +138,18 @@ fn vertex_normals(positions: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]> {
         .collect()
 }
 
-/// Concatenates meshes into one (all primitives of one glTF mesh become one object LOD).
+/// Concatenates meshes into one (the primitives of one glTF mesh that share a texture become
+/// one object LOD). Texture coordinates are kept when every part has them.
 pub fn concat(meshes: Vec<Mesh>) -> Mesh {
+    let textured = meshes.iter().all(Mesh::has_uvs);
     let mut out = Mesh::default();
     for m in meshes {
         let base = out.vertices.len() as u32;
         out.vertices.extend(m.vertices);
         out.indices.extend(m.indices.into_iter().map(|i| i + base));
+        if textured {
+            out.uvs.extend(m.uvs);
+        }
     }
     out
 }

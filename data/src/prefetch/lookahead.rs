@@ -190,6 +190,9 @@ impl Prefetcher {
 
     /// Adds the LODs of one object from the coarsest up to its maximum; returns the bytes they
     /// will occupy in the client's cache (decoded: a compressed segment claims its plain size).
+    /// A textured object's coarse texture segment comes right after its coarsest LOD, and the
+    /// segment of the finest mip useful at the nearest point of the range
+    /// ([`crate::texture::TextureRecord::useful_segment`]) right after its finest.
     fn add_object(
         &self,
         o: u32,
@@ -205,18 +208,52 @@ impl Prefetcher {
         };
         let lods = header.lods_of(inst);
         let max = max_lod_in_range(lods, &inst.bounds, range, policy, half_fov_y);
+        let texture = header.texture_of(inst).map(|t| {
+            let nearest = (distance_to_box(range.eye, &inst.bounds) - range.radius).max(0.0);
+            let px = projected_pixels(&inst.bounds, nearest, policy, half_fov_y).sqrt();
+            let span = header
+                .objects
+                .get(inst.object as usize)
+                .map_or(1.0, |r| r.uv_span);
+            (t, t.useful_segment(px, span))
+        });
         let mut bytes = 0;
-        for (i, l) in lods.iter().enumerate().skip(max) {
-            let b = self.segment_bytes(l.segment);
-            bytes += crate::geometry::plain_size(l.vertices, l.triangles).max(b);
+        let push = |cands: &mut Vec<Candidate>, item: NeedItem, level: u32| {
             cands.push(Candidate {
                 now: false,
                 object: o,
-                level: (lods.len() - 1 - i) as u32,
+                level,
                 frames,
                 seq: cands.len() as u32,
-                item: need(l.segment, NeedKind::Geometry, i as u8, b, frames),
+                item,
             });
+        };
+        for (i, l) in lods.iter().enumerate().skip(max) {
+            let b = self.segment_bytes(l.segment);
+            bytes += crate::geometry::plain_size(l.vertices, l.triangles, l.uv).max(b);
+            let level = (lods.len() - 1 - i) as u32;
+            push(
+                cands,
+                need(l.segment, NeedKind::Geometry, i as u8, b, frames),
+                level,
+            );
+            let Some((t, useful)) = texture else {
+                continue;
+            };
+            // The coarse mips with the coarsest LOD; the useful ones with the finest, never
+            // mandatory (level 1 at least).
+            let mut mips = |k: usize, level: u32| {
+                let s = t.segments[k].segment;
+                let b = self.segment_bytes(s);
+                push(cands, need(s, NeedKind::Mips, k as u8, b, frames), level);
+                b
+            };
+            if i + 1 == lods.len() {
+                bytes += mips(0, level);
+            }
+            if i == max && useful > 0 {
+                bytes += mips(useful, level.max(1));
+            }
         }
         bytes
     }

@@ -422,6 +422,7 @@ mod tests {
                     .map(|p| Vertex::new((*p).into(), [0.0, 1.0, 0.0], GREY))
                     .collect(),
                 indices: vec![0, 1, 2, 0, 3, 1],
+                uvs: Vec::new(),
             };
             let set = critical_vertices(&m, &CriticalParams::default());
             let fold: Vec<_> = set

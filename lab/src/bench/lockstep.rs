@@ -219,6 +219,8 @@ impl<'a> Bench<'a> {
                             mesh,
                             transform: Mat4::IDENTITY,
                             color: [1.0; 4],
+                            texture: None,
+                            alpha: Default::default(),
                         });
                     }
                 }
@@ -237,6 +239,8 @@ impl<'a> Bench<'a> {
                     mesh,
                     transform: scene.transforms[o as usize],
                     color: scene.colours[o as usize],
+                    texture: None,
+                    alpha: Default::default(),
                 })
             })
             .collect()

@@ -18,7 +18,7 @@ use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::Header;
 use portico_data::path::CameraPath;
 use portico_protocol::Policy;
-use portico_render::{GpuImpostor, GpuMesh};
+use portico_render::{GpuImpostor, GpuMesh, GpuTexture};
 use serde::Serialize;
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -153,6 +153,7 @@ enum Resident {
     Mesh(GpuMesh),
     Stab(Arc<StabList>),
     Impostor(GpuImpostor),
+    Texture(GpuTexture),
 }
 
 /// The model as the client knows it.

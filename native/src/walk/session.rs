@@ -203,6 +203,12 @@ fn load_model(remote: &Remote) -> Result<Model> {
             segments: m.segments,
             stabs,
             textures,
+            mips: m
+                .header
+                .textures
+                .iter()
+                .flat_map(|t| t.segments.iter().map(move |s| (s.segment, t.wrap)))
+                .collect(),
             decoded: m.header.decoded_sizes().collect(),
         },
         header: m.header,

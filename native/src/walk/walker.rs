@@ -106,6 +106,10 @@ impl<'a> Walker<'a> {
                             let gpu = i.gpu_bytes();
                             (Resident::Impostor(i), bytes.max(gpu))
                         }
+                        Payload::Texture(t) => {
+                            let gpu = t.gpu_bytes();
+                            (Resident::Texture(t), bytes.max(gpu))
+                        }
                     };
                     match self.cache.insert(id, value, charge) {
                         Ok(released) => row.released_segments += released.len() as u32,
@@ -186,16 +190,10 @@ impl<'a> Walker<'a> {
         let mut draws = Vec::with_capacity(d.drawn.len() + d.boxes.len());
         for o in &d.drawn {
             if let Some(Resident::Mesh(mesh)) = cache.get(o.segment) {
-                let inst = &header.instances[o.instance as usize];
-                let color = header
-                    .materials
-                    .get(inst.material as usize)
-                    .map_or([1.0; 4], |m| m.base_color);
-                draws.push(Draw {
-                    mesh,
-                    transform: Mat4::from_cols_array(&inst.transform),
-                    color,
-                });
+                draws.push(Draw::of(header, o, mesh, |s| match cache.get(s) {
+                    Some(Resident::Texture(t)) => Some(t),
+                    _ => None,
+                }));
             }
         }
         let textured = match &header.hierarchy {
@@ -372,11 +370,7 @@ fn stand_ins<'c>(
             (Stand::Textured, Some(Resident::Impostor(i))) => textured.push(i),
             _ => {
                 if let Some(mesh) = colour.get(&n) {
-                    draws.push(Draw {
-                        mesh,
-                        transform: Mat4::IDENTITY,
-                        color: [1.0; 4],
-                    });
+                    draws.push(Draw::new(mesh, Mat4::IDENTITY, [1.0; 4]));
                 }
             }
         }

@@ -32,6 +32,9 @@ pub enum Semantic {
     InverseBind,
     /// Primitive indices: SCALAR UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT.
     Indices,
+    /// `TEXCOORD_n`: VEC2 float, or normalized UNSIGNED_BYTE/UNSIGNED_SHORT (quantised: any
+    /// 8/16-bit integer).
+    TexCoord,
 }
 
 impl Semantic {
@@ -45,6 +48,7 @@ impl Semantic {
             Semantic::Target => "morph target",
             Semantic::InverseBind => "inverseBindMatrices",
             Semantic::Indices => "indices",
+            Semantic::TexCoord => "TEXCOORD",
         }
     }
 
@@ -69,6 +73,7 @@ impl Semantic {
             ),
             Semantic::Weights => (ty == Type::Vec4, float || unorm, false),
             Semantic::InverseBind => (ty == Type::Mat4, float, false),
+            Semantic::TexCoord => (ty == Type::Vec2, float || unorm, small),
             Semantic::Indices => (
                 ty == Type::Scalar,
                 matches!(c, U8 | U16 | U32) && !normalized,

@@ -179,7 +179,7 @@ impl Views {
 }
 
 /// Decodes a `data:` URI with base64 content.
-fn data_uri(uri: &str) -> Result<Vec<u8>, String> {
+pub(super) fn data_uri(uri: &str) -> Result<Vec<u8>, String> {
     let (_, payload) = uri.split_once(";base64,").ok_or("data URI is not base64")?;
     base64::engine::general_purpose::STANDARD
         .decode(payload.trim())

@@ -15,17 +15,21 @@
 //!   in f64; the model moves to a local origin ([`crate::bulk::local_origin`]) kept in
 //!   [`Model::origin`]; objects far from the bulk are named in a warning.
 //! - Node `extras`: `occluder: true` marks structural occluders; every other scalar is a tag.
-//! - Vertex colour = `COLOR_0` × the primitive's base colour factor.
+//! - Vertex colour = `COLOR_0` × the primitive's base colour factor; the base-colour texture
+//!   (PNG or JPEG, with its sampler's wrap modes and `KHR_texture_transform` baked into the
+//!   coordinates) and the alpha mode go to the material (`material`). Primitives of one mesh
+//!   with different textures become separate objects: an object draws with one texture.
 
 mod accessor;
 mod buffers;
+mod material;
 mod primitive;
 
 use super::concat;
 use crate::bulk::{DBox, MAX_COORDINATE, bulk, local_origin};
 use crate::error::{DataError, Result};
 use crate::geometry::Mesh;
-use crate::model::{Instance, Material, Model, ObjectDef};
+use crate::model::{Instance, Model, ObjectDef};
 use ::gltf::json;
 use accessor::{Accessors, Semantic};
 use buffers::{Buffers, Views};
@@ -86,14 +90,17 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>) -> Result<Model, String> 
         .extensions_used
         .iter()
         .any(|e| e == "KHR_mesh_quantization");
+    let mats = material::materials(&root, &raw, &views, base, &mut warnings);
     let mut imp = Importer {
         root: &root,
         raw: &raw,
         acc: Accessors::new(&root, &views, quantization),
         model: Model::default(),
         defs: HashMap::new(),
+        uv: mats.uv,
     };
-    imp.model.materials = materials(&root);
+    imp.model.materials = mats.materials;
+    imp.model.textures = mats.textures;
     imp.run(&mut warnings)?;
     if !imp.acc.undeclared_quantization.is_empty() {
         warnings.push(format!(
@@ -173,17 +180,6 @@ fn check(root: &json::Root) -> Result<Vec<String>, String> {
     Ok(warnings)
 }
 
-/// The material table: index 0 is a default white, glTF material `i` is at `i + 1`.
-fn materials(root: &json::Root) -> Vec<Material> {
-    let mut out = vec![Material::default()];
-    out.extend(root.materials.iter().map(|m| Material {
-        name: m.name.clone().unwrap_or_default(),
-        base_color: m.pbr_metallic_roughness.base_color_factor.0,
-        texture: None,
-    }));
-    out
-}
-
 /// An instance before the model is moved to its local origin.
 struct Placed {
     node: usize,
@@ -196,8 +192,10 @@ struct Importer<'a> {
     raw: &'a Value,
     acc: Accessors<'a>,
     model: Model,
-    /// (mesh, LOD meshes, morph weights' bits) → definition.
-    defs: HashMap<(usize, Vec<usize>, Vec<u32>), u32>,
+    /// (mesh, LOD meshes, morph weights' bits) → definitions (one per texture).
+    defs: HashMap<(usize, Vec<usize>, Vec<u32>), Vec<u32>>,
+    /// Per glTF material, how its texture maps coordinates (`None`: untextured).
+    uv: Vec<Option<material::UvMap>>,
 }
 
 impl Importer<'_> {
@@ -215,21 +213,27 @@ impl Importer<'_> {
                 continue;
             };
             let at = |e: String| format!("node {n}{}: {e}", name_of(&node.name));
-            let p = match node.skin {
+            let ps = match node.skin {
                 Some(skin) => self
                     .skinned(n, mesh.value(), skin.value(), &world)
                     .map_err(at)?,
                 None => {
-                    let def = self.definition(n, mesh.value()).map_err(at)?;
-                    Placed {
-                        node: n,
-                        def,
-                        world: w,
-                    }
+                    let defs = self.definition(n, mesh.value()).map_err(at)?;
+                    defs.into_iter()
+                        .map(|def| Placed {
+                            node: n,
+                            def,
+                            world: w,
+                        })
+                        .collect()
                 }
             };
             // Points and lines are not drawn: a mesh with no triangle primitive is no object.
-            if self.model.defs[p.def as usize].lods[0].indices.is_empty() {
+            let drawn: Vec<Placed> = ps
+                .into_iter()
+                .filter(|p| !self.model.defs[p.def as usize].lods[0].indices.is_empty())
+                .collect();
+            if drawn.is_empty() {
                 warnings.push(format!(
                     "node {n}{}: mesh {} has no triangles (points or lines only): skipped",
                     name_of(&node.name),
@@ -237,7 +241,7 @@ impl Importer<'_> {
                 ));
                 continue;
             }
-            placed.push(p);
+            placed.extend(drawn);
         }
         self.place(placed, warnings)
     }
@@ -338,30 +342,35 @@ impl Importer<'_> {
         Ok(m)
     }
 
-    /// The definition for a plain mesh node, created on first use.
-    fn definition(&mut self, n: usize, mesh: usize) -> Result<u32, String> {
+    /// The definitions for a plain mesh node (one per texture its primitives use), created on
+    /// first use. A mesh split by texture keeps no `MSFT_lod` levels: they are one mesh each.
+    fn definition(&mut self, n: usize, mesh: usize) -> Result<Vec<u32>, String> {
         let lods = self.lod_meshes(n)?;
         let weights = self.morph_weights(n, mesh);
         let key = (mesh, lods, weights.iter().map(|w| w.to_bits()).collect());
-        if let Some(&d) = self.defs.get(&key) {
-            return Ok(d);
+        if let Some(d) = self.defs.get(&key) {
+            return Ok(d.clone());
         }
-        let mut levels = vec![self.mesh(mesh, &weights, None)?];
-        for &l in &key.1 {
-            levels.push(self.mesh(l, &self.morph_weights(n, l), None)?);
-        }
-        let d = self.push_def(mesh, levels);
-        self.defs.insert(key, d);
-        Ok(d)
+        let groups = self.mesh(mesh, &weights, None)?;
+        let defs = if let [(material, finest)] = groups.as_slice() {
+            let mut levels = vec![finest.clone()];
+            for &l in &key.1 {
+                let coarser = self.mesh(l, &self.morph_weights(n, l), None)?;
+                levels.push(concat(coarser.into_iter().map(|(_, m)| m).collect()));
+            }
+            vec![self.push_def(mesh, *material, levels)]
+        } else {
+            groups
+                .into_iter()
+                .map(|(material, m)| self.push_def(mesh, material, vec![m]))
+                .collect()
+        };
+        self.defs.insert(key, defs.clone());
+        Ok(defs)
     }
 
-    fn push_def(&mut self, mesh: usize, lods: Vec<Mesh>) -> u32 {
+    fn push_def(&mut self, mesh: usize, material: u32, lods: Vec<Mesh>) -> u32 {
         let m = &self.root.meshes[mesh];
-        let material = m
-            .primitives
-            .first()
-            .and_then(|p| p.material)
-            .map_or(0, |i| i.value() as u32 + 1);
         self.model.defs.push(ObjectDef {
             name: m.name.clone().unwrap_or_else(|| format!("mesh{mesh}")),
             lods,
@@ -410,7 +419,7 @@ impl Importer<'_> {
         mesh: usize,
         skin: usize,
         world: &[Option<DMat4>],
-    ) -> Result<Placed, String> {
+    ) -> Result<Vec<Placed>, String> {
         let s = &self.root.skins[skin];
         let joints: Vec<DMat4> = s
             .joints
@@ -447,34 +456,55 @@ impl Importer<'_> {
             .map(|(j, b)| to_anchor * *j * *b)
             .collect();
         let weights = self.morph_weights(n, mesh);
-        let lod = self.mesh(mesh, &weights, Some(&matrices))?;
-        let def = self.push_def(mesh, vec![lod]);
-        Ok(Placed {
-            node: n,
-            def,
-            world: anchor,
-        })
+        let groups = self.mesh(mesh, &weights, Some(&matrices))?;
+        Ok(groups
+            .into_iter()
+            .map(|(material, lod)| Placed {
+                node: n,
+                def: self.push_def(mesh, material, vec![lod]),
+                world: anchor,
+            })
+            .collect())
     }
 
-    /// All triangle primitives of a mesh, concatenated; `skin` holds joint matrices for a
-    /// skinned mesh.
+    /// The triangle primitives of a mesh, concatenated per texture and alpha mode (untextured
+    /// ones together), each group with the material of its first primitive; `skin` holds joint
+    /// matrices for a skinned mesh. Never empty.
     fn mesh(
         &mut self,
         mesh: usize,
         weights: &[f32],
         skin: Option<&[DMat4]>,
-    ) -> Result<Mesh, String> {
-        let mut parts = Vec::new();
+    ) -> Result<Vec<(u32, Mesh)>, String> {
+        type Key = (Option<u32>, crate::texture::AlphaMode);
+        let mut groups: Vec<(Key, u32, Vec<Mesh>)> = Vec::new();
         let name = name_of(&self.root.meshes[mesh].name);
         for p in 0..self.root.meshes[mesh].primitives.len() {
-            if let Some(part) =
-                primitive::primitive(self.root, &mut self.acc, mesh, p, weights, skin)
+            let material = self.root.meshes[mesh].primitives[p]
+                .material
+                .map(|m| m.value());
+            let uv = material.and_then(|m| self.uv.get(m).copied().flatten());
+            let Some(part) =
+                primitive::primitive(self.root, &mut self.acc, mesh, p, weights, skin, uv)
                     .map_err(|e| format!("mesh {mesh}{name} primitive {p}: {e}"))?
-            {
-                parts.push(part);
+            else {
+                continue;
+            };
+            let index = material.map_or(0, |m| m as u32 + 1);
+            let m = &self.model.materials[index as usize];
+            let key = (m.texture.filter(|_| part.has_uvs()), m.alpha);
+            match groups.iter_mut().find(|g| g.0 == key) {
+                Some(g) => g.2.push(part),
+                None => groups.push((key, index, vec![part])),
             }
         }
-        Ok(concat(parts))
+        if groups.is_empty() {
+            return Ok(vec![(0, Mesh::default())]);
+        }
+        Ok(groups
+            .into_iter()
+            .map(|(_, material, parts)| (material, concat(parts)))
+            .collect())
     }
 
     /// Moves the instances to the model's local origin and names the strays.

@@ -17,6 +17,7 @@ pub(super) fn primitive(
     p: usize,
     weights: &[f32],
     skin: Option<&[DMat4]>,
+    uv: Option<super::material::UvMap>,
 ) -> Result<Option<Mesh>, String> {
     use json::mesh::{Mode, Semantic as S};
     let prim = &root.meshes[mesh].primitives[p];
@@ -164,7 +165,18 @@ pub(super) fn primitive(
         Mode::TriangleFan => fan_to_list(&indices),
         _ => indices,
     };
-    mesh_from_streams(&positions, normals.as_deref(), &colors, indices).map(Some)
+    let mut mesh = mesh_from_streams(&positions, normals.as_deref(), &colors, indices)?;
+    // A textured material's coordinates, transformed; a primitive without them is drawn in its
+    // colour alone.
+    if let Some(map) = uv
+        && let Some(a) = attr(S::TexCoords(map.set))
+    {
+        let (v, _) = acc.floats(a, Semantic::TexCoord)?;
+        same_count(a, "TEXCOORD", v.len() / 2)?;
+        mesh.uvs = v.chunks_exact(2).map(|c| map.apply([c[0], c[1]])).collect();
+        mesh.validate()?;
+    }
+    Ok(Some(mesh))
 }
 
 fn strip_to_list(s: &[u32]) -> Vec<u32> {

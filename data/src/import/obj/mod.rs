@@ -6,13 +6,18 @@
 //! error it reports names the source line. Positions are read in double precision and moved to
 //! the model's local origin ([`crate::bulk::local_origin`]): survey coordinates keep their
 //! millimetres. A material library that is missing or unreadable costs only colours (warned).
+//! A material's `map_Kd` image (PNG or JPEG, beside the library) is its texture, with `map_d`'s
+//! luminance as a cut-out mask and `d` below 1 as blending; an image that is missing or does
+//! not decode is named in a warning and the material keeps its colour.
 
 pub mod text;
 
 use super::mesh_from_streams;
 use crate::bulk::{DBox, bulk, local_origin};
 use crate::error::{DataError, Result};
+use crate::import::image::decode;
 use crate::model::{Instance, Material, Model, ObjectDef};
+use crate::texture::{AlphaMode, Wrap};
 use glam::{DVec3, Mat4};
 use std::io::{BufRead, Read};
 use std::path::Path;
@@ -71,18 +76,27 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>) -> Result<Model, String> 
         materials: vec![Material::default()],
         ..Model::default()
     };
-    model.materials.extend(mtl.iter().map(|m| Material {
-        name: m.name.clone(),
-        base_color: m.diffuse.map_or([1.0; 4], |d| {
-            [
-                d[0] as f32,
-                d[1] as f32,
-                d[2] as f32,
-                m.dissolve.unwrap_or(1.0) as f32,
-            ]
-        }),
-        texture: None,
-    }));
+    for m in &mtl {
+        let (texture, mask) = match &m.diffuse_texture {
+            Some(file) => material_texture(base, m, file, &mut model.textures, &mut warnings),
+            None => (None, false),
+        };
+        let alpha = m.dissolve.unwrap_or(1.0) as f32;
+        model.materials.push(Material {
+            name: m.name.clone(),
+            base_color: m.diffuse.map_or([1.0, 1.0, 1.0, alpha], |d| {
+                [d[0] as f32, d[1] as f32, d[2] as f32, alpha]
+            }),
+            texture,
+            alpha: if mask {
+                AlphaMode::Mask(0.5)
+            } else if alpha < 1.0 {
+                AlphaMode::Blend
+            } else {
+                AlphaMode::Opaque
+            },
+        });
+    }
     // Positions in f64: the bulk and its origin first, then everything relative to it.
     let objects: Vec<&tobj::Model> = models
         .iter()
@@ -142,8 +156,22 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>) -> Result<Model, String> 
             vec![base; positions.len()]
         };
         let normals = (!normals.is_empty()).then_some(normals.as_slice());
-        let lod = mesh_from_streams(&positions, normals, &colors, mesh.indices.clone())
+        let mut lod = mesh_from_streams(&positions, normals, &colors, mesh.indices.clone())
             .map_err(|e| format!("object '{}': {e}", m.name))?;
+        let textured = model
+            .materials
+            .get(material as usize)
+            .is_some_and(|m| m.texture.is_some());
+        if textured && mesh.texcoords.len() == mesh.positions.len() / 3 * 2 {
+            // OBJ puts v = 0 at the image's bottom; textures here start at the top (glTF).
+            lod.uvs = mesh
+                .texcoords
+                .chunks_exact(2)
+                .map(|c| [c[0] as f32, 1.0 - c[1] as f32])
+                .collect();
+            lod.validate()
+                .map_err(|e| format!("object '{}': {e}", m.name))?;
+        }
         let def = model.defs.len() as u32;
         model.defs.push(ObjectDef {
             name: m.name.clone(),
@@ -161,6 +189,76 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>) -> Result<Model, String> 
     }
     model.warnings = warnings;
     Ok(model)
+}
+
+/// Loads a material's `map_Kd` (and `map_d` as its alpha) into `textures`, once per file:
+/// the texture's index and whether it is a cut-out. A map that cannot be read costs a warning.
+fn material_texture(
+    base: Option<&Path>,
+    m: &tobj::Material,
+    file: &str,
+    textures: &mut Vec<crate::texture::TextureImage>,
+    warnings: &mut Vec<String>,
+) -> (Option<u32>, bool) {
+    let load = |file: &str| -> Result<crate::texture::TextureImage, String> {
+        let dir = base.ok_or("no directory to read it from")?;
+        let path = map_path(dir, file);
+        let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        decode(file, &bytes, [Wrap::Repeat; 2]).map_err(|e| format!("{}: {e}", path.display()))
+    };
+    if let Some(i) = textures.iter().position(|t| t.name == file) {
+        return (Some(i as u32), m.dissolve_texture.is_some());
+    }
+    let mut img = match load(file) {
+        Ok(img) => img,
+        Err(e) => {
+            warnings.push(format!(
+                "material '{}': map_Kd {e}; drawn in its colour",
+                m.name
+            ));
+            return (None, false);
+        }
+    };
+    let mut mask = false;
+    if let Some(d) = &m.dissolve_texture {
+        match load(d) {
+            Ok(a) => {
+                let a = image::imageops::resize(
+                    &image::RgbaImage::from_raw(a.width, a.height, a.rgba).unwrap_or_default(),
+                    img.width,
+                    img.height,
+                    image::imageops::FilterType::Triangle,
+                );
+                for (p, q) in img.rgba.chunks_exact_mut(4).zip(a.pixels()) {
+                    p[3] = ((q[0] as u32 + q[1] as u32 + q[2] as u32) / 3) as u8;
+                }
+                mask = true;
+            }
+            Err(e) => warnings.push(format!("material '{}': map_d {e}; opaque", m.name)),
+        }
+    }
+    textures.push(img);
+    (Some(textures.len() as u32 - 1), mask)
+}
+
+/// A map statement's file beside the library: the whole text, else its last word (after options
+/// such as `-s 1 1 1` or `-bm 0.5`), with Windows separators (`.\tex.jpg`) read as `/`, else
+/// the bare file name in the library's directory; the first that exists.
+fn map_path(dir: &Path, file: &str) -> std::path::PathBuf {
+    let last = file.split_whitespace().last().unwrap_or(file);
+    let mut candidates = Vec::new();
+    for f in [file.trim(), last] {
+        let f = f.replace('\\', "/");
+        candidates.push(dir.join(&f));
+        if let Some(name) = Path::new(&f).file_name() {
+            candidates.push(dir.join(name));
+        }
+    }
+    candidates
+        .iter()
+        .find(|p| p.is_file())
+        .cloned()
+        .unwrap_or_else(|| candidates.swap_remove(2))
 }
 
 /// A reader that hands out at most one line per `fill_buf`, so that when the parser fails,

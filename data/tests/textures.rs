@@ -1,0 +1,259 @@
+//! Textures from real files: glTF's base-colour texture in its three containers (assimp's
+//! BoxTextured sample, from the `assimp-testmodels` package CI installs), OBJ's `map_Kd` JPEGs
+//! (assimp's spider), a missing image, and the database's mip segments.
+
+use portico_data::Database;
+use portico_data::build::{BuildOptions, Quiet, build};
+use portico_data::format::SegmentKind;
+use portico_data::import::import_file;
+use portico_data::texture::{TextureView, Wrap};
+use std::path::{Path, PathBuf};
+
+const MODELS: &str = "/usr/share/assimp/models";
+
+fn model(rel: &str) -> PathBuf {
+    let p = Path::new(MODELS).join(rel);
+    assert!(
+        p.exists(),
+        "{} is missing: install the assimp-testmodels package",
+        p.display()
+    );
+    p
+}
+
+#[test]
+fn box_textured_imports_its_texture_in_all_three_containers() {
+    for rel in [
+        "glTF2/BoxTextured-glTF/BoxTextured.gltf",
+        "glTF2/BoxTextured-glTF-Binary/BoxTextured.glb",
+        "glTF2/BoxTextured-glTF-Embedded/BoxTextured.gltf",
+    ] {
+        let m = import_file(&model(rel)).unwrap();
+        assert!(m.warnings.is_empty(), "{rel}: {:?}", m.warnings);
+        assert_eq!(m.textures.len(), 1, "{rel}");
+        let t = &m.textures[0];
+        assert_eq!((t.width, t.height, t.rgba.len()), (211, 211, 211 * 211 * 4));
+        // The .gltf sample's sampler says MIRRORED_REPEAT along s, CLAMP_TO_EDGE along t; the
+        // other two say REPEAT.
+        let want = if rel.ends_with("-glTF/BoxTextured.gltf") {
+            [Wrap::Mirror, Wrap::Clamp]
+        } else {
+            [Wrap::Repeat; 2]
+        };
+        assert_eq!(t.wrap, want, "{rel}");
+        assert_eq!(m.materials[1].texture, Some(0), "{rel}");
+        assert_eq!(m.defs.len(), 1);
+        let mesh = &m.defs[0].lods[0];
+        assert_eq!(mesh.uvs.len(), mesh.vertices.len(), "{rel}");
+        // Its coordinates run to 6 along u: the mirrored repeat is part of the sample.
+        assert!(
+            mesh.uvs.iter().flatten().all(|x| (0.0..=6.0).contains(x)),
+            "{rel}"
+        );
+        assert_eq!(mesh.uv_span(), 6.0, "{rel}");
+    }
+}
+
+#[test]
+fn a_missing_image_is_a_warning_and_the_box_keeps_its_colour() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = model("glTF2/BoxTextured-glTF");
+    for f in ["BoxTextured.gltf", "BoxTextured0.bin"] {
+        std::fs::copy(src.join(f), dir.path().join(f)).unwrap();
+    }
+    let m = import_file(&dir.path().join("BoxTextured.gltf")).unwrap();
+    assert!(m.textures.is_empty());
+    assert_eq!(m.materials[1].texture, None);
+    assert!(!m.defs[0].lods[0].has_uvs());
+    assert_eq!(m.warnings.len(), 1, "{:?}", m.warnings);
+    assert!(
+        m.warnings[0].contains("CesiumLogoFlat.png") && m.warnings[0].contains("base colour"),
+        "{}",
+        m.warnings[0]
+    );
+}
+
+#[test]
+fn the_spider_keeps_its_jpeg_maps() {
+    let m = import_file(&model("OBJ/spider.obj")).unwrap();
+    // The library names its maps Windows-style (`map_Kd .\\SpiderTex.jpg`).
+    let names: Vec<&str> = m.textures.iter().map(|t| t.name.as_str()).collect();
+    assert!(names.contains(&".\\SpiderTex.jpg"), "{names:?}");
+    assert!(names.contains(&".\\drkwood2.jpg"), "{names:?}");
+    assert!(m.warnings.is_empty(), "{:?}", m.warnings);
+    let textured = m
+        .defs
+        .iter()
+        .filter(|d| m.materials[d.material as usize].texture.is_some())
+        .collect::<Vec<_>>();
+    assert!(!textured.is_empty());
+    for d in textured {
+        let mesh = &d.lods[0];
+        assert_eq!(mesh.uvs.len(), mesh.vertices.len(), "{}", d.name);
+    }
+    // A map it cannot find is a warning naming the file, and the material keeps its colour.
+    let missing = m
+        .warnings
+        .iter()
+        .filter(|w| w.contains("map_Kd"))
+        .collect::<Vec<_>>();
+    for w in &missing {
+        assert!(w.contains("drawn in its colour"), "{w}");
+    }
+}
+
+#[test]
+fn a_built_database_holds_each_texture_coarse_first_as_whole_mip_chains() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("box.portico");
+    let m = import_file(&model("glTF2/BoxTextured-glTF-Binary/BoxTextured.glb")).unwrap();
+    build(
+        m,
+        &out,
+        &BuildOptions {
+            no_cells: true,
+            no_hierarchy: true,
+            ..Default::default()
+        },
+        &Quiet,
+    )
+    .unwrap();
+    let db = Database::open(&out).unwrap();
+    let h = db.header();
+    assert_eq!(h.textures.len(), 1);
+    let t = &h.textures[0];
+    // 211 texels: levels 211, 105, 52, 26, 13, 6, 3, 1. Levels of at most 64 texels are the
+    // coarse segment; 105 and 211 get a segment each, holding every coarser level too.
+    let shapes: Vec<(u32, u32)> = t.segments.iter().map(|s| (s.width, s.levels)).collect();
+    assert_eq!(shapes, vec![(52, 6), (105, 7), (211, 8)]);
+    for s in &t.segments {
+        let entry = db.segments()[s.segment as usize];
+        assert_eq!(SegmentKind::from_u16(entry.kind), Some(SegmentKind::Mips));
+        let bytes = db.segment(s.segment).unwrap();
+        let v = TextureView::parse(&bytes).unwrap();
+        assert_eq!((v.width, v.levels), (s.width, s.levels));
+        assert_eq!(bytes.len() as u64, s.bytes());
+    }
+    // The coarse segment is small: what arrives with the first geometry.
+    assert!(
+        t.segments[0].bytes() < 16 * 1024,
+        "{}",
+        t.segments[0].bytes()
+    );
+    let lods = &h.objects[0].lods;
+    assert!(lods[0].uv, "the finest LOD carries coordinates");
+    assert!(h.objects[0].uv_span > 0.5);
+    assert_eq!(h.materials[h.objects[0].material as usize].texture, Some(0));
+    let avg = t.average;
+    assert!(avg.iter().take(3).all(|c| (0.0..=1.0).contains(c)));
+}
+
+/// The tiny building (one storey) with the generator's textured materials, built and opened
+/// for prefetch answers.
+fn textured_tiny() -> portico_data::prefetch::Prefetcher {
+    let dir = tempfile::tempdir().unwrap();
+    let params = portico_generator::Params {
+        preset: portico_generator::Preset::Tiny,
+        seed: 5,
+        floors: Some(1),
+    };
+    let b = portico_generator::generate(&params, &mut |_| {}).unwrap();
+    let glb = dir.path().join("tiny.glb");
+    std::fs::write(&glb, portico_generator::with_textures(&b.glb).unwrap()).unwrap();
+    let out = dir.path().join("tiny.portico");
+    build(
+        import_file(&glb).unwrap(),
+        &out,
+        &BuildOptions::default(),
+        &Quiet,
+    )
+    .unwrap();
+    let db = std::sync::Arc::new(Database::open(&out).unwrap());
+    portico_data::prefetch::Prefetcher::new(db).unwrap()
+}
+
+/// Prefetch answers list each texture coarse first, with the first object that needs it, before
+/// any finer level of that texture and before the finer LODs of the objects drawn with it; a
+/// texture's finer segments come after its coarse one, never instead of it.
+#[test]
+fn prefetch_brings_coarse_mips_with_the_geometry_that_needs_them() {
+    use portico_protocol::{NeedKind, Observer, Policy, RangeCull};
+    let p = textured_tiny();
+    let h = p.database().header();
+    assert_eq!(h.textures.len(), 4, "brick, wood, carpet, tiles");
+    let texture_of_segment = |s: u32| {
+        h.textures.iter().enumerate().find_map(|(t, r)| {
+            r.segments
+                .iter()
+                .position(|m| m.segment == s)
+                .map(|k| (t, k))
+        })
+    };
+    let g = p.graph().unwrap();
+    let policy = Policy {
+        read_bytes: 1 << 30,
+        range_cull: RangeCull::Any,
+        ..Policy::default()
+    };
+    let mut mips_seen = 0;
+    for c in g.cells.iter().filter(|c| c.live) {
+        let mid = glam::Vec3::from(c.bounds.min).lerp(glam::Vec3::from(c.bounds.max), 0.5);
+        let obs = Observer {
+            eye: mid.into(),
+            dir: [1.0, 0.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            velocity: [0.0; 3],
+            half_fov_x: 0.6,
+            half_fov_y: 0.45,
+            max_speed: 1.5,
+            max_turn: 1.0,
+        };
+        let a = p.answer(&obs, &policy, &Default::default()).unwrap();
+        let mut first_at = std::collections::HashMap::new();
+        for (i, item) in a.items.iter().enumerate() {
+            if item.kind != NeedKind::Mips {
+                continue;
+            }
+            mips_seen += 1;
+            let (t, k) = texture_of_segment(item.segment).expect("a texture's segment");
+            assert_eq!(item.lod as usize, k, "the item names its level");
+            assert_eq!(item.bytes, h.textures[t].segments[k].bytes());
+            // The first segment of each texture listed is its coarse one.
+            let first = *first_at.entry(t).or_insert((i, k));
+            assert_eq!(
+                first.1, 0,
+                "texture {t}: segment {k} listed before the coarse one"
+            );
+        }
+        // Every textured object's coarse texture comes before its finer LODs.
+        for item in a
+            .items
+            .iter()
+            .filter(|i| i.kind == NeedKind::Geometry && i.lod > 0)
+        {
+            let finer_of = h.instances.iter().find(|inst| {
+                let lods = h.lods_of(inst);
+                lods.iter().any(|l| l.segment == item.segment) && lods.len() > 1
+            });
+            let Some(inst) = finer_of else { continue };
+            let is_coarsest = h.lods_of(inst).last().map(|l| l.segment) == Some(item.segment);
+            if is_coarsest {
+                continue;
+            }
+            if let Some(t) = h.materials[inst.material as usize].texture {
+                let at = a
+                    .items
+                    .iter()
+                    .position(|i| i.segment == item.segment)
+                    .unwrap();
+                let coarse = first_at.get(&(t as usize)).map(|f| f.0);
+                assert!(
+                    coarse.is_some_and(|c| c < at),
+                    "texture {t}'s coarse segment after a finer LOD of {}",
+                    inst.name
+                );
+            }
+        }
+    }
+    assert!(mips_seen > 0, "no answer asked for a texture");
+}

@@ -1,0 +1,188 @@
+//! Materials on the GPU: base-colour textures uploaded from their mip segments
+//! ([`portico_data::texture`]: each segment a whole mip chain, sampled alone), and the
+//! pipelines that draw textured, cut-out and blended surfaces beside the walkthrough's plain
+//! one.
+
+use crate::pipeline::{Blending, surface_pipeline, vertex_layouts};
+use crate::{RenderError, extent};
+use portico_data::texture::{TextureView, Wrap};
+use wgpu::util::DeviceExt;
+
+/// One texture segment on the GPU (a mip chain from its finest level down), with the bind
+/// group that samples it; dropping it frees the texture.
+#[derive(Debug)]
+pub struct GpuTexture {
+    pub(crate) bind_group: wgpu::BindGroup,
+    bytes: u64,
+    width: u32,
+    /// Charged to the renderer's account of GPU memory held while the texture lives.
+    _held: crate::held::Charge,
+}
+
+impl GpuTexture {
+    /// GPU memory held by the texels (bytes): the segment's levels, RGBA8.
+    pub fn gpu_bytes(&self) -> u64 {
+        self.bytes
+    }
+
+    /// Width of its finest level (texels).
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+}
+
+/// The pipelines of material surfaces and what every texture shares.
+#[derive(Debug)]
+pub(crate) struct Materials {
+    layout: wgpu::BindGroupLayout,
+    /// Textured, opaque or cut out.
+    pub(crate) textured: wgpu::RenderPipeline,
+    /// Textured and blended.
+    pub(crate) textured_over: wgpu::RenderPipeline,
+    /// Plain and blended.
+    pub(crate) plain_over: wgpu::RenderPipeline,
+}
+
+impl Materials {
+    /// Creates the pipelines; `globals` is the walkthrough pipeline's group 0 layout.
+    pub(crate) fn new(
+        device: &wgpu::Device,
+        globals: &wgpu::BindGroupLayout,
+        samples: u32,
+    ) -> Materials {
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("base colour"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Texture {
+                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
+                        view_dimension: wgpu::TextureViewDimension::D2,
+                        multisampled: false,
+                    },
+                    count: None,
+                },
+                wgpu::BindGroupLayoutEntry {
+                    binding: 1,
+                    visibility: wgpu::ShaderStages::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+            ],
+        });
+        let shader = device.create_shader_module(wgpu::include_wgsl!("shader.wgsl"));
+        let textured_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("textured"),
+            bind_group_layouts: &[Some(globals), Some(&layout)],
+            immediate_size: 0,
+        });
+        let plain_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("plain"),
+            bind_group_layouts: &[Some(globals)],
+            immediate_size: 0,
+        });
+        let (with_uv, without) = (vertex_layouts(true), vertex_layouts(false));
+        let textured_entries = ("vs_textured", "fs_textured");
+        let pipeline = |label, layout, entries, buffers: &[_], blending| {
+            surface_pipeline(
+                device, label, layout, &shader, entries, buffers, None, samples, blending,
+            )
+        };
+        Materials {
+            textured: pipeline(
+                "textured",
+                &textured_layout,
+                textured_entries,
+                &with_uv,
+                Blending::Opaque,
+            ),
+            textured_over: pipeline(
+                "textured, blended",
+                &textured_layout,
+                textured_entries,
+                &with_uv,
+                Blending::Over,
+            ),
+            plain_over: pipeline(
+                "blended",
+                &plain_layout,
+                ("vs_main", "fs_main"),
+                &without,
+                Blending::Over,
+            ),
+            layout,
+        }
+    }
+
+    /// Uploads a texture segment (its whole mip chain, in one texture) to be sampled with
+    /// `wrap`, charged to `held`.
+    pub(crate) fn upload(
+        &self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        held: &crate::held::Held,
+        segment: &[u8],
+        wrap: [Wrap; 2],
+    ) -> Result<GpuTexture, RenderError> {
+        let view = TextureView::parse(segment).map_err(RenderError::Texture)?;
+        let max = device.limits().max_texture_dimension_2d;
+        if view.width > max || view.height > max {
+            return Err(RenderError::Texture(format!(
+                "{}x{} texels is beyond the device's {max}",
+                view.width, view.height
+            )));
+        }
+        let texture = device.create_texture_with_data(
+            queue,
+            &wgpu::TextureDescriptor {
+                label: Some("base colour"),
+                size: extent(view.width, view.height),
+                mip_level_count: view.levels,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::MipMajor,
+            view.texels,
+        );
+        let address = |w: Wrap| match w {
+            Wrap::Repeat => wgpu::AddressMode::Repeat,
+            Wrap::Mirror => wgpu::AddressMode::MirrorRepeat,
+            Wrap::Clamp => wgpu::AddressMode::ClampToEdge,
+        };
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("base colour"),
+            address_mode_u: address(wrap[0]),
+            address_mode_v: address(wrap[1]),
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Linear,
+            ..Default::default()
+        });
+        let tv = texture.create_view(&Default::default());
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("base colour"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: wgpu::BindingResource::TextureView(&tv),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::Sampler(&sampler),
+                },
+            ],
+        });
+        let bytes = view.texels.len() as u64;
+        Ok(GpuTexture {
+            bind_group,
+            bytes,
+            width: view.width,
+            _held: held.charge(bytes),
+        })
+    }
+}
