@@ -132,7 +132,7 @@ pub fn build_with(
 
     let t1 = Instant::now();
     let mut w = DbWriter::create(out)?;
-    let textures = write_textures(&mut w, &textures, obs)?;
+    let texture_records = write_textures(&mut w, &textures, obs)?;
     let objects = write_objects(&mut w, &lods, opts, obs)?;
     let records = if opts.flatten {
         write_flattened(&mut w, &lods, &instances, opts.compress, obs)?
@@ -152,6 +152,7 @@ pub fn build_with(
             lods: &lods,
             instances: &instances,
             materials: &materials,
+            textures: &textures,
         };
         Some(write_hierarchy(&mut w, &scene, painter, obs)?)
     };
@@ -177,7 +178,7 @@ pub fn build_with(
         bounds,
         origin,
         materials,
-        textures,
+        textures: texture_records,
         objects,
         instances: records,
         cells,
@@ -201,6 +202,7 @@ struct Scene<'a> {
     lods: &'a [(String, u32, Vec<LodMesh>)],
     instances: &'a [Instance],
     materials: &'a [crate::model::Material],
+    textures: &'a [TextureImage],
 }
 
 /// Clusters the instances (Maciel §6.3.2) and paints each cluster's impostors from the real
@@ -259,15 +261,19 @@ fn paint_items<'a>(
                 .position(|l| px * px / l.mesh.triangle_count().max(1) as f32 >= 16.0)
                 .unwrap_or(levels.len().saturating_sub(1));
             let mesh = &levels.get(lod)?.mesh;
-            let color = scene
-                .materials
-                .get(inst.material as usize)
-                .map_or([1.0; 4], |m| m.base_color);
+            let material = scene.materials.get(inst.material as usize);
+            let color = material.map_or([1.0; 4], |m| m.base_color);
+            let texture = material
+                .and_then(|m| m.texture)
+                .filter(|_| mesh.has_uvs())
+                .and_then(|t| Some((t, scene.textures.get(t as usize)?)));
             Some(PaintItem {
                 key: (inst.def, lod as u32),
                 mesh,
                 transform: inst.transform,
                 color,
+                texture,
+                alpha: material.map_or(Default::default(), |m| m.alpha),
             })
         })
         .collect()

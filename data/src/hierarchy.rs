@@ -90,6 +90,11 @@ pub struct PaintItem<'a> {
     pub transform: Mat4,
     /// Material colour (linear RGBA).
     pub color: [f32; 4],
+    /// The material's texture (its index in the model, and the image) when the mesh has
+    /// coordinates for it.
+    pub texture: Option<(u32, &'a crate::texture::TextureImage)>,
+    /// How the material's alpha is used.
+    pub alpha: crate::texture::AlphaMode,
 }
 
 /// Paints impostor textures at build time (Maciel §5.2.2: orthographic captures of the real

@@ -212,6 +212,27 @@ fn strip(n: u32) -> Mesh {
 }
 
 #[test]
+fn texture_coordinates_round_trip_bit_for_bit_and_the_record_counts_them() {
+    let mut mesh = strip(3_000);
+    mesh.uvs = (0..3_000)
+        .map(|i| [(i % 256) as f32 * 0.37 - 20.0, (i / 256) as f32 * 1.5])
+        .collect();
+    let packed = encode(&mesh);
+    let plain = encode_geometry(&mesh);
+    assert!(packed.len() * 2 < plain.len(), "{} of {}", packed.len(), plain.len());
+    // The LOD record's size (with coordinates) is what it decodes to; without, it is refused.
+    let (v, t) = (mesh.vertices.len() as u32, mesh.triangle_count() as u32);
+    let with = portico_data::geometry::plain_size(v, t, true);
+    assert_eq!(with, plain.len() as u64);
+    let decoded = codec::to_gpu_layout_as(3, &packed, Some(with)).unwrap();
+    let back = GeometryView::parse(&decoded).unwrap().to_mesh();
+    assert_eq!(back.uvs, mesh.uvs);
+    assert_eq!(rotated(&back.indices), rotated(&mesh.indices));
+    let without = portico_data::geometry::plain_size(v, t, false);
+    assert!(codec::to_gpu_layout_as(3, &packed, Some(without)).is_err());
+}
+
+#[test]
 fn large_meshes_and_repeated_vertices_round_trip() {
     // 70,000 vertices: 274 codec blocks and u32 indices in the plain layout.
     for mesh in [strip(1_000), strip(70_000)] {

@@ -1,20 +1,24 @@
 //! Painting impostors at build time (Maciel §5.2.2): each face of a cluster's box is an
 //! orthographic view of the real objects beneath it, drawn with the walkthrough renderer on a
 //! transparent background, so the textured box shows what the objects would show from far away
-//! and lets what is behind its gaps show through. `portico build` hands a [`Painter`] to
+//! and lets what is behind its gaps show through; textured objects are painted with their
+//! textures. `portico build` hands a [`Painter`] to
 //! [`portico_data::build::build_with`].
 
-use crate::{Draw, GpuMesh, RenderError, Renderer};
+use crate::{Draw, GpuMesh, GpuTexture, RenderError, Renderer};
+use portico_data::texture::{cut_segments, mip_chain};
 use glam::{Mat4, Vec3};
 use image::RgbaImage;
 use portico_data::geometry::{Aabb, encode_geometry};
 use portico_data::hierarchy::{FACES, ImpostorPainter, PaintItem, face_frame};
 use std::collections::HashMap;
 
-/// The build-time impostor painter: a renderer, and every geometry it has uploaded.
+/// The build-time impostor painter: a renderer, and every geometry and texture it has
+/// uploaded.
 pub struct Painter {
     renderer: Renderer,
     meshes: HashMap<(u32, u32), GpuMesh>,
+    textures: HashMap<u32, GpuTexture>,
     tile: u32,
 }
 
@@ -26,6 +30,7 @@ impl Painter {
         Ok(Painter {
             renderer,
             meshes: HashMap::new(),
+            textures: HashMap::new(),
             tile: 16,
         })
     }
@@ -49,8 +54,8 @@ impl Painter {
                     mesh: self.meshes.get(&it.key)?,
                     transform: it.transform,
                     color: it.color,
-                    texture: None,
-                    alpha: Default::default(),
+                    texture: it.texture.and_then(|(t, _)| self.textures.get(&t)),
+                    alpha: it.alpha,
                 })
             })
             .collect();
@@ -81,6 +86,21 @@ impl ImpostorPainter for Painter {
                     .upload(&encode_geometry(it.mesh))
                     .map_err(|e| e.to_string())?;
                 self.meshes.insert(it.key, gpu);
+            }
+            if let Some((t, img)) = it.texture
+                && !self.textures.contains_key(&t)
+            {
+                // The whole chain in one texture: the finest segment holds every level.
+                let chain = mip_chain(img.width, img.height, &img.rgba);
+                let finest = cut_segments(img.width, img.height, &chain).pop();
+                let Some((_, _, _, bytes)) = finest else {
+                    continue;
+                };
+                let gpu = self
+                    .renderer
+                    .upload_texture(&bytes, img.wrap)
+                    .map_err(|e| e.to_string())?;
+                self.textures.insert(t, gpu);
             }
         }
         let mut atlas = RgbaImage::new(tile * 3, tile * 2);
