@@ -19,7 +19,9 @@ fn build_tiny(dir: &Path, textured: bool) -> std::path::PathBuf {
         seed: 2,
         floors: Some(1),
     };
-    let mut glb = portico_generator::generate(&params, &mut |_| {}).unwrap().glb;
+    let mut glb = portico_generator::generate(&params, &mut |_| {})
+        .unwrap()
+        .glb;
     let name = if textured {
         glb = portico_generator::with_textures(&glb).unwrap();
         "textured"
@@ -29,7 +31,13 @@ fn build_tiny(dir: &Path, textured: bool) -> std::path::PathBuf {
     let file = dir.join(format!("{name}.glb"));
     std::fs::write(&file, &glb).unwrap();
     let db = dir.join(format!("{name}.portico"));
-    build(import_file(&file).unwrap(), &db, &BuildOptions::default(), &Quiet).unwrap();
+    build(
+        import_file(&file).unwrap(),
+        &db,
+        &BuildOptions::default(),
+        &Quiet,
+    )
+    .unwrap();
     db
 }
 
@@ -95,7 +103,11 @@ fn a_textured_walk_streams_and_draws_its_textures_within_the_budget() {
             s.gpu_held_peak_bytes
         );
         assert!(s.drawn_triangles.max > 0.0, "{name}");
-        assert!(s.objects_skipped.mean <= 0.5, "{name}: {}", s.objects_skipped.mean);
+        assert!(
+            s.objects_skipped.mean <= 0.5,
+            "{name}: {}",
+            s.objects_skipped.mean
+        );
     }
     // The same tour reads the textures too (their coarse levels at least).
     assert!(

@@ -78,6 +78,10 @@ pub struct Drawn {
     /// The material colour the draw multiplies in (linear RGBA): the base colour, times the
     /// texture's average colour when the object is textured but drawn without its texture.
     pub tint: [f32; 4],
+    /// The texture segment its size on screen asks for (about a texel per pixel:
+    /// [`portico_data::texture::TextureRecord::useful_segment`]), resident or not; `None`
+    /// for an untextured object or LOD. What demand fetch and the oracle fetch for textures.
+    pub wants_texture: Option<u32>,
 }
 
 /// The texture segment and the tint an instance's LOD is drawn with ([`Drawn::texture`],
@@ -246,12 +250,23 @@ impl Decider {
                     let coarse = scene.header.texture_of(inst).map(|t| t.segments[0].segment);
                     touched.extend(coarse.filter(|&s| s != t && resident.has(s)));
                 }
+                let span = scene
+                    .header
+                    .objects
+                    .get(inst.object as usize)
+                    .map_or(1.0, |o| o.uv_span);
+                let wants_texture = scene
+                    .header
+                    .texture_of(inst)
+                    .filter(|_| lods[l + skip].uv)
+                    .map(|t| t.segments[t.useful_segment(c.pixels.sqrt(), span)].segment);
                 drawn.push(Drawn {
                     instance: c.id,
                     lod: l + skip,
                     segment: lods[l + skip].segment,
                     texture,
                     tint,
+                    wants_texture,
                 });
             }
         }

@@ -219,7 +219,12 @@ fn texture_coordinates_round_trip_bit_for_bit_and_the_record_counts_them() {
         .collect();
     let packed = encode(&mesh);
     let plain = encode_geometry(&mesh);
-    assert!(packed.len() * 2 < plain.len(), "{} of {}", packed.len(), plain.len());
+    assert!(
+        packed.len() * 2 < plain.len(),
+        "{} of {}",
+        packed.len(),
+        plain.len()
+    );
     // The LOD record's size (with coordinates) is what it decodes to; without, it is refused.
     let (v, t) = (mesh.vertices.len() as u32, mesh.triangle_count() as u32);
     let with = portico_data::geometry::plain_size(v, t, true);

@@ -4,7 +4,8 @@
 //! the material's repeat size), so `soda` and `mega` can be measured with and without textures.
 //!
 //! Walls are brick, floors carpet (offices, classrooms, conference rooms, the library), tiles
-//! (labs, corridors, stairwells) or wood (auditoriums), furniture wood; ceilings stay plain.
+//! (labs, corridors, stairwells) or wood (auditoriums), wooden furniture (desks, chairs,
+//! shelves, tables, doors, stairs) wood; ceilings, lights, screens and plants stay plain.
 //! The vertex colours stay and tint the textures.
 
 use crate::GenerateError;
@@ -62,7 +63,13 @@ impl Surface {
     fn of(extras: &Value) -> Option<Surface> {
         match extras["kind"].as_str()? {
             "wall" => Some(Surface::Brick),
-            "furniture" => Some(Surface::Wood),
+            // Wooden furniture; lights, screens, plants and the like keep their colours.
+            "furniture" => match extras["type"].as_str()? {
+                "desk" | "chair" | "bookshelf" | "table" | "student_desk" | "round_table"
+                | "lab_bench" | "stool" | "auditorium_seat" | "lectern" | "coat_rack" | "door"
+                | "stairs" | "library_shelf" | "filing_cabinet" => Some(Surface::Wood),
+                _ => None,
+            },
             "floor" => Some(match extras["room"].as_str() {
                 Some("lab" | "corridor" | "stairwell") => Surface::Tiles,
                 Some("auditorium") => Surface::Wood,

@@ -29,7 +29,8 @@ pub struct Manifest<H> {
 /// One row of the manifest's segment table.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SegmentInfo {
-    /// Segment kind (1 geometry, 2 cell graph, 3 stab list, 4 texture, 5 occluders).
+    /// Segment kind (1 geometry, 2 cell graph, 3 stab list, 4 impostor atlas, 5 occluders, 6
+    /// material texture mips).
     pub kind: u16,
     /// Length in bytes as served.
     pub bytes: u64,

@@ -6,11 +6,11 @@
 //! [`portico_data::build::build_with`].
 
 use crate::{Draw, GpuMesh, GpuTexture, RenderError, Renderer};
-use portico_data::texture::{cut_segments, mip_chain};
 use glam::{Mat4, Vec3};
 use image::RgbaImage;
 use portico_data::geometry::{Aabb, encode_geometry};
 use portico_data::hierarchy::{FACES, ImpostorPainter, PaintItem, face_frame};
+use portico_data::texture::{cut_segments, mip_chain};
 use std::collections::HashMap;
 
 /// The build-time impostor painter: a renderer, and every geometry and texture it has

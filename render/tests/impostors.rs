@@ -12,12 +12,21 @@ use portico_render::{Draw, Renderer};
 use std::path::Path;
 
 fn build_tiny(dir: &Path) -> Database {
+    build_tiny_as(dir, false)
+}
+
+/// The tiny building (seed 4, one storey), with the generator's textured materials or not,
+/// built with the client's painter.
+fn build_tiny_as(dir: &Path, textured: bool) -> Database {
     let params = portico_generator::Params {
         preset: portico_generator::Preset::Tiny,
         seed: 4,
         floors: Some(1),
     };
-    let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
+    let mut b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
+    if textured {
+        b.glb = portico_generator::with_textures(&b.glb).unwrap();
+    }
     let glb = dir.join("tiny.glb");
     std::fs::write(&glb, &b.glb).unwrap();
     let db = dir.join("tiny.portico");
@@ -64,6 +73,43 @@ fn every_object_is_under_one_cluster_and_big_clusters_have_textured_boxes() {
     assert!(
         root.face_colors[0][3] > 0.1,
         "the building covers its side view"
+    );
+}
+
+/// Sum over an atlas's covered texels of red minus blue, and their count.
+fn redness(png: &[u8]) -> (f64, f64) {
+    let img = image::load_from_memory(png).unwrap().to_rgba8();
+    img.pixels()
+        .filter(|p| p[3] > 200)
+        .fold((0.0, 0.0), |(s, n), p| {
+            (s + p[0] as f64 - p[2] as f64, n + 1.0)
+        })
+}
+
+#[test]
+fn impostors_of_textured_objects_are_painted_with_their_textures() {
+    let dir = tempfile::tempdir().unwrap();
+    let (p, t) = (dir.path().join("plain"), dir.path().join("textured"));
+    std::fs::create_dir_all(&p).unwrap();
+    std::fs::create_dir_all(&t).unwrap();
+    // Mean red minus blue of every atlas's covered texels: the brick walls show.
+    let red = |db: &Database| -> f64 {
+        let h = db.header().hierarchy.as_ref().unwrap();
+        let (s, n) = h
+            .nodes
+            .iter()
+            .filter(|n| n.texture != u32::MAX)
+            .map(|n| redness(&db.segment(n.texture).unwrap()))
+            .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+        s / n
+    };
+    let (plain, textured) = (
+        red(&build_tiny_as(&p, false)),
+        red(&build_tiny_as(&t, true)),
+    );
+    assert!(
+        textured > plain + 20.0,
+        "atlas red minus blue: textured {textured:.1}, plain {plain:.1}"
     );
 }
 

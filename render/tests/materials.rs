@@ -54,12 +54,33 @@ fn mean(pixels: impl Iterator<Item = [u8; 4]>) -> ([u8; 3], f32) {
     (sum.map(|s| to_srgb((s / n) as f32)), spread)
 }
 
+/// Where a texture coordinate lands in `0..1` under a wrap mode.
+fn wrap(x: f32, w: Wrap) -> f32 {
+    match w {
+        Wrap::Repeat => x.rem_euclid(1.0),
+        Wrap::Mirror => {
+            let t = x.rem_euclid(2.0);
+            if t > 1.0 { 2.0 - t } else { t }
+        }
+        Wrap::Clamp => x.clamp(0.0, 0.999_999),
+    }
+}
+
 #[test]
 fn box_textured_shows_its_texture_on_each_face() {
-    let m = import_file(std::path::Path::new(
-        "/usr/share/assimp/models/glTF2/BoxTextured-glTF-Binary/BoxTextured.glb",
-    ))
-    .expect("BoxTextured (install assimp-testmodels)");
+    // The .gltf's sampler mirrors along u and clamps along v; the other two repeat.
+    for file in [
+        "BoxTextured-glTF/BoxTextured.gltf",
+        "BoxTextured-glTF-Binary/BoxTextured.glb",
+        "BoxTextured-glTF-Embedded/BoxTextured.gltf",
+    ] {
+        box_textured(file);
+    }
+}
+
+fn box_textured(file: &str) {
+    let m = import_file(&std::path::Path::new("/usr/share/assimp/models/glTF2").join(file))
+        .expect("BoxTextured (install assimp-testmodels)");
     let tex = &m.textures[0];
     let mesh = m.defs[0].lods[0].transformed(&m.instances[0].transform);
     let mut r = renderer();
@@ -111,8 +132,8 @@ fn box_textured_shows_its_texture_on_each_face() {
         let want = mean((0..n * n).map(|i| {
             let u = u0 + (u1 - u0) * ((i % n) as f32 + 0.5) / n as f32;
             let v = v0 + (v1 - v0) * ((i / n) as f32 + 0.5) / n as f32;
-            let tx = (u.rem_euclid(1.0) * tex.width as f32) as u32 % tex.width;
-            let ty = (v.rem_euclid(1.0) * tex.height as f32) as u32 % tex.height;
+            let tx = (wrap(u, tex.wrap[0]) * tex.width as f32) as u32 % tex.width;
+            let ty = (wrap(v, tex.wrap[1]) * tex.height as f32) as u32 % tex.height;
             let o = ((ty * tex.width + tx) * 4) as usize;
             [tex.rgba[o], tex.rgba[o + 1], tex.rgba[o + 2], 255]
         }));
@@ -120,7 +141,7 @@ fn box_textured_shows_its_texture_on_each_face() {
             let d = drawn.0[c].abs_diff(want.0[c]);
             assert!(
                 d <= 8,
-                "axis {axis}: drawn {:?}, texture {:?}",
+                "{file} axis {axis}: drawn {:?}, texture {:?}",
                 drawn.0,
                 want.0
             );
@@ -128,7 +149,7 @@ fn box_textured_shows_its_texture_on_each_face() {
         // Its texture, not one colour: the logo's contrast survives.
         assert!(
             drawn.1 > 0.5 * want.1 && want.1 > 20.0,
-            "axis {axis}: spread drawn {} texture {}",
+            "{file} axis {axis}: spread drawn {} texture {}",
             drawn.1,
             want.1
         );

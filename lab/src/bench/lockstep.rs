@@ -235,12 +235,13 @@ impl<'a> Bench<'a> {
             .iter()
             .filter_map(|&(o, l)| {
                 let mesh = scene.meshes.get(&scene.segment(o, l)?)?;
+                let (texture, color, alpha) = scene.material(o, mesh.has_uvs());
                 Some(Draw {
                     mesh,
                     transform: scene.transforms[o as usize],
-                    color: scene.colours[o as usize],
-                    texture: None,
-                    alpha: Default::default(),
+                    color,
+                    texture,
+                    alpha,
                 })
             })
             .collect()

@@ -11,7 +11,7 @@ use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::{Header, LodRecord};
 use portico_data::geometry::{Aabb, GeometryView, encode_geometry};
 use portico_data::hierarchy::colour_box;
-use portico_render::{GpuImpostor, GpuMesh, Renderer};
+use portico_render::{AlphaMode, GpuImpostor, GpuMesh, GpuTexture, Renderer};
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::path::Path;
@@ -60,6 +60,9 @@ pub struct Scene {
     pub colour_boxes: Vec<GpuMesh>,
     /// Each cluster's textured box, where it has one.
     pub textured: HashMap<u32, GpuImpostor>,
+    /// Each material texture at full resolution (its finest segment: the whole chain), by its
+    /// index in the header.
+    pub textures: HashMap<u32, GpuTexture>,
 }
 
 impl Scene {
@@ -100,7 +103,9 @@ impl Scene {
             gpu_bytes: 0,
             colour_boxes: Vec::new(),
             textured: HashMap::new(),
+            textures: HashMap::new(),
         };
+        scene.load_textures(&db, renderer)?;
         scene.load_geometry(&db, renderer, params)?;
         scene.load_clusters(&db, renderer)?;
         Ok(scene)
@@ -144,6 +149,44 @@ impl Scene {
         }
         u32::try_from(next_cv).context("more than 2³² critical vertices")?;
         Ok(())
+    }
+
+    /// Uploads every material texture's finest segment (every level of its chain).
+    fn load_textures(&mut self, db: &Database, renderer: &Renderer) -> Result<()> {
+        for (i, t) in self.header.textures.iter().enumerate() {
+            let Some(finest) = t.segments.last() else {
+                continue;
+            };
+            let bytes = db.segment(finest.segment)?;
+            let gpu = renderer
+                .upload_texture(&bytes, t.wrap)
+                .with_context(|| format!("texture {i} ({})", t.name))?;
+            self.gpu_bytes += gpu.gpu_bytes();
+            self.textures.insert(i as u32, gpu);
+        }
+        Ok(())
+    }
+
+    /// The texture, tint and alpha mode instance `i` is drawn with at full detail, for a LOD
+    /// with texture coordinates (`uv`) or without (a box LOD: the texture's average colour
+    /// joins the tint, as the client draws it).
+    pub fn material(&self, i: u32, uv: bool) -> (Option<&GpuTexture>, [f32; 4], AlphaMode) {
+        let base = self.colours.get(i as usize).copied().unwrap_or([1.0; 4]);
+        let Some(inst) = self.header.instances.get(i as usize) else {
+            return (None, base, AlphaMode::Opaque);
+        };
+        let m = self.header.materials.get(inst.material as usize);
+        let alpha = m.map_or(AlphaMode::Opaque, |m| m.alpha);
+        match self.header.texture_of(inst) {
+            Some(_) if uv => {
+                let t = m
+                    .and_then(|m| m.texture)
+                    .and_then(|t| self.textures.get(&t));
+                (t, base, alpha)
+            }
+            Some(t) => (None, std::array::from_fn(|k| base[k] * t.average[k]), alpha),
+            None => (None, base, alpha),
+        }
     }
 
     /// Uploads every cluster's average-colour box and textured box.

@@ -303,6 +303,7 @@ impl Client {
         }
         // What was drawn (the eye's stab list too, when it was used) counts as used.
         let mut used: Vec<u32> = d.drawn.iter().map(|o| o.segment).collect();
+        used.extend(d.drawn.iter().filter_map(|o| o.texture));
         if !d.visible.fallback {
             used.extend(d.eye_stab);
         }
@@ -371,6 +372,17 @@ impl Client {
             }
             if !self.cache.contains(segs[want]) {
                 wanted.push((c.pixels, segs[want]));
+            }
+        }
+        // The texture level each drawn object's size asks for, when it lacks it.
+        for o in &decision.drawn {
+            if let Some(t) = o.wants_texture.filter(|&t| !self.cache.contains(t)) {
+                let pixels = decision
+                    .candidates
+                    .iter()
+                    .find(|c| c.id == o.instance)
+                    .map_or(0.0, |c| c.pixels);
+                wanted.push((pixels, t));
             }
         }
         stand_ins.sort_by(|a, b| b.0.total_cmp(&a.0));

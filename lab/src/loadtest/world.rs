@@ -294,6 +294,7 @@ fn truth(world: &World, marked: &[bool], dt: f64) -> Vec<Option<Truth>> {
         let mut counted = HashSet::new();
         for o in &d.drawn {
             t.wants.push(o.segment);
+            t.wants.extend(o.wants_texture);
             let lods = world
                 .header
                 .lods_of(&world.header.instances[o.instance as usize]);
