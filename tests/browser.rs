@@ -193,10 +193,7 @@ fn native_view(db: &Path, eye: [f32; 3], dir: [f32; 3]) -> image::RgbaImage {
         .map(|(inst, mesh)| portico_render::Draw {
             mesh,
             transform: glam::Mat4::from_cols_array(&inst.transform),
-            color: header
-                .materials
-                .get(inst.material as usize)
-                .map_or([1.0; 4], |m| m.base_color),
+            color: [1.0; 4],
             texture: None,
             alpha: Default::default(),
         })

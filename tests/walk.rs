@@ -129,10 +129,7 @@ fn full_detail(
         .map(|(i, mesh)| Draw {
             mesh,
             transform: glam::Mat4::from_cols_array(&i.transform),
-            color: h
-                .materials
-                .get(i.material as usize)
-                .map_or([1.0; 4], |m| m.base_color),
+            color: [1.0; 4],
             texture: None,
             alpha: Default::default(),
         })

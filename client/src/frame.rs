@@ -75,8 +75,9 @@ pub struct Drawn {
     /// The texture segment it is drawn with: the finest resident one of its material's
     /// texture, when the LOD has texture coordinates (never waited for).
     pub texture: Option<u32>,
-    /// The material colour the draw multiplies in (linear RGBA): the base colour, times the
-    /// texture's average colour when the object is textured but drawn without its texture.
+    /// The colour the draw multiplies in (linear RGBA): white, or the texture's average colour
+    /// when the object is textured but drawn without its texture. (The material's base colour
+    /// is in the vertex colours already: the importers multiply it in.)
     pub tint: [f32; 4],
     /// The texture segment its size on screen asks for (about a texel per pixel:
     /// [`portico_data::texture::TextureRecord::useful_segment`]), resident or not; `None`
@@ -92,15 +93,13 @@ pub fn material_of(
     lod: usize,
     has: &dyn Fn(u32) -> bool,
 ) -> (Option<u32>, [f32; 4]) {
+    // The material's base colour is in the vertex colours already (the importers multiply it
+    // in): the tint adds only what the texture would have.
     let Some(inst) = header.instances.get(instance as usize) else {
         return (None, [1.0; 4]);
     };
-    let base = header
-        .materials
-        .get(inst.material as usize)
-        .map_or([1.0; 4], |m| m.base_color);
     let Some(t) = header.texture_of(inst) else {
-        return (None, base);
+        return (None, [1.0; 4]);
     };
     let uv = header.lods_of(inst).get(lod).is_some_and(|l| l.uv);
     let segment = t
@@ -110,8 +109,8 @@ pub fn material_of(
         .map(|s| s.segment)
         .find(|&s| uv && has(s));
     match segment {
-        Some(s) => (Some(s), base),
-        None => (None, std::array::from_fn(|k| base[k] * t.average[k])),
+        Some(s) => (Some(s), [1.0; 4]),
+        None => (None, t.average),
     }
 }
 
@@ -247,7 +246,11 @@ impl Decider {
                 // The texture drawn and its coarse segment stay at the head of the cache.
                 if let Some(t) = texture {
                     touched.push(t);
-                    let coarse = scene.header.texture_of(inst).map(|t| t.segments[0].segment);
+                    let coarse = scene
+                        .header
+                        .texture_of(inst)
+                        .and_then(|t| t.segments.first())
+                        .map(|m| m.segment);
                     touched.extend(coarse.filter(|&s| s != t && resident.has(s)));
                 }
                 let span = scene
@@ -259,7 +262,8 @@ impl Decider {
                     .header
                     .texture_of(inst)
                     .filter(|_| lods[l + skip].uv)
-                    .map(|t| t.segments[t.useful_segment(c.pixels.sqrt(), span)].segment);
+                    .and_then(|t| t.segments.get(t.useful_segment(c.pixels.sqrt(), span)))
+                    .map(|m| m.segment);
                 drawn.push(Drawn {
                     instance: c.id,
                     lod: l + skip,

@@ -262,7 +262,8 @@ fn paint_items<'a>(
                 .unwrap_or(levels.len().saturating_sub(1));
             let mesh = &levels.get(lod)?.mesh;
             let material = scene.materials.get(inst.material as usize);
-            let color = material.map_or([1.0; 4], |m| m.base_color);
+            // The base colour is in the vertex colours already.
+            let color = [1.0; 4];
             let texture = material
                 .and_then(|m| m.texture)
                 .filter(|_| mesh.has_uvs())

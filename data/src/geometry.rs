@@ -361,21 +361,34 @@ impl<'a> GeometryView<'a> {
         if header.flags & GEOMETRY_MESHOPT != 0 {
             return Err("geometry segment is compressed (meshopt): decode it first".into());
         }
-        let vlen = header.vertex_count as usize * std::mem::size_of::<Vertex>();
+        // In u64, then checked into usize: on wasm32 a hostile count would wrap.
         let isize = if header.flags & GEOMETRY_U32_INDICES != 0 {
             4
         } else {
             2
         };
-        let ilen = header.index_count as usize * isize;
-        let uvlen = if header.flags & GEOMETRY_UV != 0 {
-            header.vertex_count as usize * UV_BYTES as usize
+        let uv = if header.flags & GEOMETRY_UV != 0 {
+            UV_BYTES
         } else {
             0
         };
-        let vr = header.vertex_offset as usize..header.vertex_offset as usize + vlen;
-        let ur = vr.end..vr.end + uvlen;
-        let ir = header.index_offset as usize..header.index_offset as usize + ilen;
+        let count = header.vertex_count as u64;
+        let span = |start: u64, len: u64| -> Option<std::ops::Range<usize>> {
+            let end = start.checked_add(len)?;
+            Some(usize::try_from(start).ok()?..usize::try_from(end).ok()?)
+        };
+        let vstart = header.vertex_offset as u64;
+        let vlen = count * std::mem::size_of::<Vertex>() as u64;
+        let (Some(vr), Some(ur), Some(ir)) = (
+            span(vstart, vlen),
+            span(vstart + vlen, count * uv),
+            span(
+                header.index_offset as u64,
+                header.index_count as u64 * isize,
+            ),
+        ) else {
+            return Err("geometry streams run past the end of the segment".into());
+        };
         let (Some(vertex_bytes), Some(uv_bytes), Some(index_bytes)) =
             (bytes.get(vr), bytes.get(ur.clone()), bytes.get(ir.clone()))
         else {

@@ -13,7 +13,9 @@ use std::collections::BTreeMap;
 pub struct Material {
     /// Name from the source file.
     pub name: String,
-    /// Linear RGBA base colour, multiplied with the vertex colour.
+    /// Linear RGBA base colour. The importers multiply it into the vertex colours, so draws do
+    /// not apply it again; build-time stand-ins without vertices (cluster colour boxes drawn
+    /// without a painter) use it.
     pub base_color: [f32; 4],
     /// The base-colour texture: an index into [`Model::textures`] (in a database, into
     /// [`crate::format::Header::textures`]), multiplied with the vertex colour.

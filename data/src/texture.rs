@@ -31,7 +31,7 @@ pub const MAX_SIZE: u32 = 4096;
 pub const TEXTURE_HEADER: usize = 16;
 
 /// How a material's texture repeats past 0..1 on one axis (glTF sampler wrap modes).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
 pub enum Wrap {
     /// Tile the image (glTF's default).
     #[default]
@@ -85,7 +85,16 @@ pub struct MipSegment {
 impl MipSegment {
     /// Bytes of the segment (header and levels).
     pub fn bytes(&self) -> u64 {
-        TEXTURE_HEADER as u64 + chain_bytes(self.width, self.height, self.levels)
+        (TEXTURE_HEADER as u64).saturating_add(chain_bytes(self.width, self.height, self.levels))
+    }
+
+    /// Whether the record describes a chain [`TextureView::parse`] would accept: each side
+    /// 1..=[`MAX_SIZE`], 1..=[`full_levels`] levels.
+    pub fn is_valid(&self) -> bool {
+        let side = 1..=MAX_SIZE;
+        side.contains(&self.width)
+            && side.contains(&self.height)
+            && (1..=full_levels(self.width, self.height)).contains(&self.levels)
     }
 }
 
@@ -138,17 +147,19 @@ pub fn full_levels(width: u32, height: u32) -> u32 {
 
 /// Size of level `i` of a chain whose finest level is `width × height`.
 pub fn level_size(width: u32, height: u32, i: u32) -> (u32, u32) {
-    ((width >> i).max(1), (height >> i).max(1))
+    let half = |x: u32| x.checked_shr(i).unwrap_or(0).max(1);
+    (half(width), half(height))
 }
 
-/// Bytes of `levels` levels from `width × height` down.
+/// Bytes of `levels` levels from `width × height` down (a chain has at most 32 levels; more
+/// count as 32, so an absurd record cannot loop or overflow).
 pub fn chain_bytes(width: u32, height: u32, levels: u32) -> u64 {
-    (0..levels)
+    (0..levels.min(32))
         .map(|i| {
             let (w, h) = level_size(width, height, i);
-            w as u64 * h as u64 * 4
+            (w as u64 * h as u64).saturating_mul(4)
         })
-        .sum()
+        .fold(0u64, u64::saturating_add)
 }
 
 /// The full mip chain of an image, finest first: each level a 2 × 2 box filter of the one above,
@@ -192,17 +203,25 @@ pub fn mip_chain(width: u32, height: u32, rgba: &[u8]) -> Vec<Vec<u8>> {
     levels
 }
 
-/// The average colour of an RGBA8 sRGB image, linear RGBA.
+/// The average colour of an RGBA8 sRGB image, linear RGBA: colour weighted by alpha (as the
+/// mip filter does, so transparent texels do not darken a cut-out's stand-in), alpha the mean.
 pub fn average_color(rgba: &[u8]) -> [f32; 4] {
     let mut acc = [0.0f64; 4];
     let n = (rgba.len() / 4).max(1) as f64;
     for p in rgba.chunks_exact(4) {
+        let a = p[3] as f64 / 255.0;
         for c in 0..3 {
-            acc[c] += to_linear(p[c]) as f64;
+            acc[c] += to_linear(p[c]) as f64 * a;
         }
-        acc[3] += p[3] as f64 / 255.0;
+        acc[3] += a;
     }
-    acc.map(|x| (x / n) as f32)
+    let w = acc[3].max(1e-12);
+    [
+        (acc[0] / w) as f32,
+        (acc[1] / w) as f32,
+        (acc[2] / w) as f32,
+        (acc[3] / n) as f32,
+    ]
 }
 
 /// sRGB byte to linear light.
@@ -371,6 +390,30 @@ mod tests {
         let small = cut_segments(16, 16, &mip_chain(16, 16, &checker(16, 16)));
         assert_eq!(small.len(), 1);
         assert_eq!(small[0].2, 5);
+    }
+
+    #[test]
+    fn absurd_records_neither_panic_nor_loop() {
+        let s = MipSegment {
+            segment: 0,
+            width: u32::MAX,
+            height: u32::MAX,
+            levels: u32::MAX,
+        };
+        assert!(!s.is_valid());
+        assert!(s.bytes() > 0);
+        assert_eq!(level_size(8, 8, 40), (1, 1));
+        let ok = MipSegment {
+            segment: 0,
+            width: 64,
+            height: 16,
+            levels: 7,
+        };
+        assert!(ok.is_valid());
+        assert!(!MipSegment { levels: 8, ..ok }.is_valid());
+        // Transparent black texels do not darken the average colour.
+        let avg = average_color(&[255, 0, 0, 255, 0, 0, 0, 0]);
+        assert_eq!((avg[0], avg[1], avg[3]), (1.0, 0.0, 0.5));
     }
 
     #[test]

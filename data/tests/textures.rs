@@ -91,15 +91,8 @@ fn the_spider_keeps_its_jpeg_maps() {
         let mesh = &d.lods[0];
         assert_eq!(mesh.uvs.len(), mesh.vertices.len(), "{}", d.name);
     }
-    // A map it cannot find is a warning naming the file, and the material keeps its colour.
-    let missing = m
-        .warnings
-        .iter()
-        .filter(|w| w.contains("map_Kd"))
-        .collect::<Vec<_>>();
-    for w in &missing {
-        assert!(w.contains("drawn in its colour"), "{w}");
-    }
+    // Every map was found: one texture per distinct map_Kd.
+    assert_eq!(m.textures.len(), 5, "{names:?}");
 }
 
 #[test]
@@ -225,19 +218,16 @@ fn prefetch_brings_coarse_mips_with_the_geometry_that_needs_them() {
                 "texture {t}: segment {k} listed before the coarse one"
             );
         }
-        // Every textured object's coarse texture comes before its finer LODs.
-        for item in a
-            .items
-            .iter()
-            .filter(|i| i.kind == NeedKind::Geometry && i.lod > 0)
-        {
-            let finer_of = h.instances.iter().find(|inst| {
-                let lods = h.lods_of(inst);
-                lods.iter().any(|l| l.segment == item.segment) && lods.len() > 1
-            });
-            let Some(inst) = finer_of else { continue };
-            let is_coarsest = h.lods_of(inst).last().map(|l| l.segment) == Some(item.segment);
-            if is_coarsest {
+        // Every textured object's coarse texture comes before its LODs finer than the coarsest
+        // with coordinates (which it follows).
+        for item in a.items.iter().filter(|i| i.kind == NeedKind::Geometry) {
+            let owner = h
+                .instances
+                .iter()
+                .find(|inst| h.lods_of(inst).iter().any(|l| l.segment == item.segment));
+            let Some(inst) = owner else { continue };
+            let coarsest_uv = h.lods_of(inst).iter().rposition(|l| l.uv);
+            if coarsest_uv.is_none_or(|c| item.lod as usize >= c) {
                 continue;
             }
             if let Some(t) = h.materials[inst.material as usize].texture {
@@ -256,4 +246,66 @@ fn prefetch_brings_coarse_mips_with_the_geometry_that_needs_them() {
         }
     }
     assert!(mips_seen > 0, "no answer asked for a texture");
+}
+
+/// Hostile or careless names: a map that names a directory, an image outside the model's
+/// directory, and textures sharing one image (decoded once).
+#[test]
+fn odd_map_names_warn_and_shared_images_decode_once() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("a.obj"),
+        "mtllib a.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nusemtl m\nf 1/1 2/2 3/3\n",
+    )
+    .unwrap();
+    for name in ["..", ".", "/"] {
+        std::fs::write(
+            d.join("a.mtl"),
+            format!("newmtl m\nKd 1 1 1\nmap_Kd {name}\n"),
+        )
+        .unwrap();
+        let m = import_file(&d.join("a.obj")).unwrap();
+        assert!(m.textures.is_empty(), "map_Kd {name}");
+        assert!(
+            m.warnings.iter().any(|w| w.contains("map_Kd")),
+            "map_Kd {name}: {:?}",
+            m.warnings
+        );
+    }
+    let src = model("glTF2/BoxTextured-glTF");
+    let sub = d.join("model");
+    std::fs::create_dir_all(&sub).unwrap();
+    std::fs::copy(src.join("BoxTextured0.bin"), sub.join("BoxTextured0.bin")).unwrap();
+    std::fs::copy(src.join("CesiumLogoFlat.png"), d.join("CesiumLogoFlat.png")).unwrap();
+    let mut json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(src.join("BoxTextured.gltf")).unwrap()).unwrap();
+    json["images"][0]["uri"] = "../CesiumLogoFlat.png".into();
+    std::fs::write(sub.join("up.gltf"), serde_json::to_vec(&json).unwrap()).unwrap();
+    let m = import_file(&sub.join("up.gltf")).unwrap();
+    assert!(m.textures.is_empty());
+    assert!(
+        m.warnings[0].contains("outside the model's directory"),
+        "{:?}",
+        m.warnings
+    );
+    // Three textures, two materials, one image with one sampler: decoded once.
+    std::fs::copy(
+        src.join("CesiumLogoFlat.png"),
+        sub.join("CesiumLogoFlat.png"),
+    )
+    .unwrap();
+    json["images"][0]["uri"] = "CesiumLogoFlat.png".into();
+    let tex = json["textures"][0].clone();
+    json["textures"] = serde_json::json!([tex.clone(), tex.clone(), tex]);
+    let mut second = json["materials"][0].clone();
+    second["pbrMetallicRoughness"]["baseColorTexture"]["index"] = 2.into();
+    json["materials"].as_array_mut().unwrap().push(second);
+    std::fs::write(sub.join("shared.gltf"), serde_json::to_vec(&json).unwrap()).unwrap();
+    let m = import_file(&sub.join("shared.gltf")).unwrap();
+    assert_eq!(m.textures.len(), 1);
+    assert_eq!(
+        (m.materials[1].texture, m.materials[2].texture),
+        (Some(0), Some(0))
+    );
 }

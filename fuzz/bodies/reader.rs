@@ -29,6 +29,12 @@ fn open_and_read(data: Vec<u8>) {
     for e in db.segments() {
         if let Ok(b) = db.segment(e.id) {
             let _ = GeometryView::parse(&b).map(|v| v.to_mesh());
+            // Texture segments: whatever parses yields every level in bounds.
+            if let Ok(t) = portico_data::texture::TextureView::parse(&b) {
+                (0..t.levels).for_each(|i| {
+                    t.level(i);
+                });
+            }
             // Compressed segments: whatever decodes must parse.
             if let Ok(plain) = portico_data::codec::decode(&b) {
                 GeometryView::parse(&plain).expect("a decoded segment parses");

@@ -19,7 +19,8 @@ pub(crate) struct Globals {
 pub(crate) struct InstanceData {
     pub(crate) model: [[f32; 4]; 4],
     pub(crate) color: [f32; 4],
-    /// x: alpha cutoff of a cut-out material (0: none); y, z, w: zero.
+    /// x: alpha cutoff of a cut-out material (0: none); y: 1 for a blended material; z, w:
+    /// zero.
     pub(crate) params: [f32; 4],
 }
 

@@ -449,7 +449,11 @@ impl Renderer {
                         AlphaMode::Mask(c) => c.max(1e-3),
                         _ => 0.0,
                     },
-                    0.0,
+                    if d.alpha == AlphaMode::Blend {
+                        1.0
+                    } else {
+                        0.0
+                    },
                     0.0,
                     0.0,
                 ],

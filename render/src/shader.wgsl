@@ -58,7 +58,8 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
 }
 
 // Textured meshes: the base-colour texture (group 1) at the mesh's coordinates (location 9),
-// mip-mapped; texels under a cut-out material's cutoff (location 8, x; 0 = none) are dropped.
+// mip-mapped; texels under a cut-out material's cutoff (location 8, x; 0 = none) are dropped;
+// alpha is written only for blended materials (location 8, y = 1).
 @group(1) @binding(0) var base_color: texture_2d<f32>;
 @group(1) @binding(1) var base_sampler: sampler;
 
@@ -81,6 +82,7 @@ struct TexturedOut {
     @location(1) color: vec4<f32>,
     @location(2) uv: vec2<f32>,
     @location(3) cutoff: f32,
+    @location(4) blend: f32,
 };
 
 @vertex
@@ -92,6 +94,7 @@ fn vs_textured(v: TexturedIn) -> TexturedOut {
     out.color = v.color * v.tint;
     out.uv = v.uv;
     out.cutoff = v.params.x;
+    out.blend = v.params.y;
     return out;
 }
 
@@ -101,6 +104,7 @@ fn fs_textured(in: TexturedOut) -> @location(0) vec4<f32> {
     if (in.cutoff > 0.0 && c.a < in.cutoff) {
         discard;
     }
-    let alpha = select(c.a, 1.0, in.cutoff > 0.0);
+    // Alpha counts only for blended materials (glTF: OPAQUE ignores it, MASK is all or nothing).
+    let alpha = select(1.0, c.a, in.blend > 0.5);
     return vec4<f32>(c.rgb * shade(in.normal), alpha);
 }

@@ -110,15 +110,16 @@ pub fn birdseye(r: &mut Renderer, db: &Database, path: &CameraPath) -> Result<Bi
     let (start, _) = path.sample(0.0);
     let cut = start.y + 0.2;
     let mut meshes = Vec::new();
-    for inst in h.instances.iter().filter(|i| i.bounds.min[1] < cut) {
+    for (i, inst) in (0u32..)
+        .zip(&h.instances)
+        .filter(|(_, i)| i.bounds.min[1] < cut)
+    {
         let Some(lod) = h.lods_of(inst).first() else {
             continue;
         };
         let bytes = db.geometry(lod)?;
-        let color = h
-            .materials
-            .get(inst.material as usize)
-            .map_or([1.0; 4], |m| m.base_color);
+        // Finest LODs without their textures: a textured object in its texture's average.
+        let color = portico_client::frame::material_of(h, i, 0, &|_| false).1;
         meshes.push((
             r.upload(&bytes)?,
             Mat4::from_cols_array(&inst.transform),

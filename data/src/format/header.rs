@@ -178,6 +178,12 @@ impl Header {
                 return Err(format!("texture {i} has no segments"));
             }
             for s in &t.segments {
+                if !s.is_valid() {
+                    return Err(format!(
+                        "texture {i}'s segment {} claims {}x{} texels in {} levels",
+                        s.segment, s.width, s.height, s.levels
+                    ));
+                }
                 let seg = segments.get(s.segment as usize).ok_or_else(|| {
                     format!("texture {i} refers to missing segment {}", s.segment)
                 })?;

@@ -6,7 +6,7 @@ use crate::texture::{MAX_SIZE, TextureImage, Wrap};
 use std::io::Cursor;
 
 /// Largest image side accepted before scaling (texels): more is a broken or hostile header.
-const MAX_DECODED_SIDE: u32 = 16_384;
+const MAX_DECODED_SIDE: u32 = 8_192;
 
 /// Decodes image bytes named `name` (for messages and the texture's name). Errors say what is
 /// wrong in one line, without the name.

@@ -72,6 +72,7 @@ impl Prefetcher {
         let mut seen_cell = vec![false; graph.cells.len()];
         let mut cands = Vec::new();
         let mut claimed = 0u64;
+        let mut claimed_mips = HashSet::new();
         let mut lookahead_cells = 0u32;
         'outer: for &(cell, frames) in &ranged {
             if let Some(seg) = self.stab_segment(cell) {
@@ -104,7 +105,15 @@ impl Prefetcher {
                         continue;
                     }
                     let first = cands.len();
-                    claimed += self.add_object(o, frames, range, half_fov_y, policy, &mut cands);
+                    claimed += self.add_object(
+                        o,
+                        frames,
+                        range,
+                        half_fov_y,
+                        policy,
+                        &mut cands,
+                        &mut claimed_mips,
+                    );
                     if now.contains(&o) {
                         cands[first..].iter_mut().for_each(|c| c.now = true);
                     }
@@ -166,6 +175,7 @@ impl Prefetcher {
     ) -> Result<Vec<Candidate>> {
         let mut cands = Vec::new();
         let mut claimed = 0u64;
+        let mut claimed_mips = HashSet::new();
         let mut order: Vec<(u32, u32)> = self
             .db
             .header()
@@ -183,16 +193,26 @@ impl Prefetcher {
                 break;
             }
             let frames = frames.min(range.depth);
-            claimed += self.add_object(o, frames, range, obs.half_fov_y, policy, &mut cands);
+            claimed += self.add_object(
+                o,
+                frames,
+                range,
+                obs.half_fov_y,
+                policy,
+                &mut cands,
+                &mut claimed_mips,
+            );
         }
         Ok(cands)
     }
 
     /// Adds the LODs of one object from the coarsest up to its maximum; returns the bytes they
     /// will occupy in the client's cache (decoded: a compressed segment claims its plain size).
-    /// A textured object's coarse texture segment comes right after its coarsest LOD, and the
-    /// segment of the finest mip useful at the nearest point of the range
-    /// ([`crate::texture::TextureRecord::useful_segment`]) right after its finest.
+    /// A textured object's coarse texture segment comes right after its coarsest LOD with
+    /// texture coordinates, and the segment of the finest mip useful at the nearest point of
+    /// the range ([`crate::texture::TextureRecord::useful_segment`]) right after its finest;
+    /// texture bytes are claimed once per segment (`claimed_mips`).
+    #[allow(clippy::too_many_arguments)]
     fn add_object(
         &self,
         o: u32,
@@ -201,6 +221,7 @@ impl Prefetcher {
         half_fov_y: f32,
         policy: &Policy,
         cands: &mut Vec<Candidate>,
+        claimed_mips: &mut HashSet<u32>,
     ) -> u64 {
         let header = self.db.header();
         let Some(inst) = header.instances.get(o as usize) else {
@@ -217,6 +238,7 @@ impl Prefetcher {
                 .map_or(1.0, |r| r.uv_span);
             (t, t.useful_segment(px, span))
         });
+        let coarsest_uv = lods.iter().rposition(|l| l.uv);
         let mut bytes = 0;
         let push = |cands: &mut Vec<Candidate>, item: NeedItem, level: u32| {
             cands.push(Candidate {
@@ -240,18 +262,21 @@ impl Prefetcher {
             let Some((t, useful)) = texture else {
                 continue;
             };
-            // The coarse mips with the coarsest LOD; the useful ones with the finest, never
-            // mandatory (level 1 at least).
+            // The coarse mips with the coarsest LOD that has coordinates (the average-colour
+            // box below it draws without); the useful ones with the finest, never mandatory
+            // (level 1 at least). A texture shared by several objects is claimed once.
             let mut mips = |k: usize, level: u32| {
-                let s = t.segments[k].segment;
+                let Some(s) = t.segments.get(k).map(|m| m.segment) else {
+                    return 0;
+                };
                 let b = self.segment_bytes(s);
                 push(cands, need(s, NeedKind::Mips, k as u8, b, frames), level);
-                b
+                if claimed_mips.insert(s) { b } else { 0 }
             };
-            if i + 1 == lods.len() {
+            if Some(i) == coarsest_uv {
                 bytes += mips(0, level);
             }
-            if i == max && useful > 0 {
+            if i == max && l.uv && useful > 0 {
                 bytes += mips(useful, level.max(1));
             }
         }

@@ -235,7 +235,7 @@ impl<'a> Bench<'a> {
             .iter()
             .filter_map(|&(o, l)| {
                 let mesh = scene.meshes.get(&scene.segment(o, l)?)?;
-                let (texture, color, alpha) = scene.material(o, mesh.has_uvs());
+                let (texture, color, alpha) = scene.material(o, l);
                 Some(Draw {
                     mesh,
                     transform: scene.transforms[o as usize],

@@ -6,6 +6,7 @@
 use super::critical::{CriticalCounts, CriticalParams, CriticalSet, critical_vertices};
 use anyhow::{Context, Result};
 use glam::{Mat4, Vec3};
+use portico_client::frame::material_of;
 use portico_data::Database;
 use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::{Header, LodRecord};
@@ -38,8 +39,6 @@ pub struct Scene {
     pub bounds: Vec<Aabb>,
     /// Object-to-world matrix per instance.
     pub transforms: Vec<Mat4>,
-    /// Material colour per instance.
-    pub colours: Vec<[f32; 4]>,
     /// GPU meshes by geometry segment id (every LOD of every instance).
     pub meshes: HashMap<u32, GpuMesh>,
     /// CPU triangles of each finest-LOD segment.
@@ -60,8 +59,8 @@ pub struct Scene {
     pub colour_boxes: Vec<GpuMesh>,
     /// Each cluster's textured box, where it has one.
     pub textured: HashMap<u32, GpuImpostor>,
-    /// Each material texture at full resolution (its finest segment: the whole chain), by its
-    /// index in the header.
+    /// Each material texture at full resolution, by its finest segment (which holds the whole
+    /// chain).
     pub textures: HashMap<u32, GpuTexture>,
 }
 
@@ -79,16 +78,6 @@ impl Scene {
                 .instances
                 .iter()
                 .map(|i| Mat4::from_cols_array(&i.transform))
-                .collect(),
-            colours: header
-                .instances
-                .iter()
-                .map(|i| {
-                    header
-                        .materials
-                        .get(i.material as usize)
-                        .map_or([1.0; 4], |m| m.base_color)
-                })
                 .collect(),
             database_id: format!("{:016x}{:016x}", p.header_checksum, p.index_checksum),
             header,
@@ -162,31 +151,23 @@ impl Scene {
                 .upload_texture(&bytes, t.wrap)
                 .with_context(|| format!("texture {i} ({})", t.name))?;
             self.gpu_bytes += gpu.gpu_bytes();
-            self.textures.insert(i as u32, gpu);
+            self.textures.insert(finest.segment, gpu);
         }
         Ok(())
     }
 
-    /// The texture, tint and alpha mode instance `i` is drawn with at full detail, for a LOD
-    /// with texture coordinates (`uv`) or without (a box LOD: the texture's average colour
-    /// joins the tint, as the client draws it).
-    pub fn material(&self, i: u32, uv: bool) -> (Option<&GpuTexture>, [f32; 4], AlphaMode) {
-        let base = self.colours.get(i as usize).copied().unwrap_or([1.0; 4]);
-        let Some(inst) = self.header.instances.get(i as usize) else {
-            return (None, base, AlphaMode::Opaque);
-        };
-        let m = self.header.materials.get(inst.material as usize);
-        let alpha = m.map_or(AlphaMode::Opaque, |m| m.alpha);
-        match self.header.texture_of(inst) {
-            Some(_) if uv => {
-                let t = m
-                    .and_then(|m| m.texture)
-                    .and_then(|t| self.textures.get(&t));
-                (t, base, alpha)
-            }
-            Some(t) => (None, std::array::from_fn(|k| base[k] * t.average[k]), alpha),
-            None => (None, base, alpha),
-        }
+    /// The texture, tint and alpha mode instance `i`'s LOD `lod` is drawn with when everything
+    /// is resident (the client's rule, [`portico_client::frame::material_of`]).
+    pub fn material(&self, i: u32, lod: usize) -> (Option<&GpuTexture>, [f32; 4], AlphaMode) {
+        let (segment, tint) =
+            material_of(&self.header, i, lod, &|s| self.textures.contains_key(&s));
+        let alpha = self
+            .header
+            .instances
+            .get(i as usize)
+            .and_then(|inst| self.header.materials.get(inst.material as usize))
+            .map_or(AlphaMode::Opaque, |m| m.alpha);
+        (segment.and_then(|s| self.textures.get(&s)), tint, alpha)
     }
 
     /// Uploads every cluster's average-colour box and textured box.

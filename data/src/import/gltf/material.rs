@@ -57,7 +57,9 @@ pub(super) fn materials(
         textures: Vec::new(),
         uv: Vec::with_capacity(root.materials.len()),
     };
-    let mut decoded: HashMap<usize, Option<u32>> = HashMap::new();
+    // Decoded once per image and wrap mode, however many textures name it.
+    let mut decoded: HashMap<(usize, [Wrap; 2]), Option<u32>> = HashMap::new();
+    let mut texels = 0u64;
     for (i, m) in root.materials.iter().enumerate() {
         let pbr = &m.pbr_metallic_roughness;
         let alpha = match m.alpha_mode {
@@ -71,21 +73,40 @@ pub(super) fn materials(
         let mut uv = None;
         if let Some(info) = &pbr.base_color_texture {
             let t = info.index.value();
-            let index = *decoded.entry(t).or_insert_with(|| {
-                match texture_image(root, raw, views, base, t) {
-                    Ok(img) => {
-                        out.textures.push(img);
-                        Some(out.textures.len() as u32 - 1)
-                    }
-                    Err(e) => {
-                        warnings.push(format!(
-                            "material {i}{}: texture {t}: {e}; drawn in its base colour",
-                            name_of(&m.name)
-                        ));
-                        None
-                    }
+            let warn = |e: String, warnings: &mut Vec<String>| {
+                warnings.push(format!(
+                    "material {i}{}: texture {t}: {e}; drawn in its base colour",
+                    name_of(&m.name)
+                ));
+            };
+            let index = match texture_source(root, raw, t) {
+                Err(e) => {
+                    warn(e, warnings);
+                    None
                 }
-            });
+                Ok(key) => *decoded.entry(key).or_insert_with(|| {
+                    let img = texture_image(root, views, base, key.0, key.1).and_then(|img| {
+                        texels += img.width as u64 * img.height as u64;
+                        if texels > MAX_MODEL_TEXELS {
+                            return Err(format!(
+                                "the model's textures pass {} M texels",
+                                MAX_MODEL_TEXELS >> 20
+                            ));
+                        }
+                        Ok(img)
+                    });
+                    match img {
+                        Ok(img) => {
+                            out.textures.push(img);
+                            Some(out.textures.len() as u32 - 1)
+                        }
+                        Err(e) => {
+                            warn(e, warnings);
+                            None
+                        }
+                    }
+                }),
+            };
             if index.is_some() {
                 let ext = &raw["materials"][i]["pbrMetallicRoughness"]["baseColorTexture"]["extensions"]
                     ["KHR_texture_transform"];
@@ -125,14 +146,12 @@ fn uv_map(set: u32, ext: &Value) -> UvMap {
     UvMap { set, transform }
 }
 
-/// Decodes glTF texture `t`'s image with its sampler's wrap modes.
-fn texture_image(
-    root: &json::Root,
-    raw: &Value,
-    views: &Views,
-    base: Option<&Path>,
-    t: usize,
-) -> Result<TextureImage, String> {
+/// Texels all of a model's textures may hold together (1 GiB decoded): past it, textures are
+/// left out with a warning.
+const MAX_MODEL_TEXELS: u64 = 256 << 20;
+
+/// glTF texture `t`'s image index and its sampler's wrap modes.
+fn texture_source(root: &json::Root, raw: &Value, t: usize) -> Result<(usize, [Wrap; 2]), String> {
     let tex = root
         .textures
         .get(t)
@@ -146,6 +165,18 @@ fn texture_image(
         .as_u64()
         .ok_or("its image is in a format this build does not read (no PNG or JPEG source)")?
         as usize;
+    Ok((source, wrap))
+}
+
+/// Decodes image `source` to be sampled with `wrap`. A URI may name a file beside the model,
+/// never one outside its directory.
+fn texture_image(
+    root: &json::Root,
+    views: &Views,
+    base: Option<&Path>,
+    source: usize,
+    wrap: [Wrap; 2],
+) -> Result<TextureImage, String> {
     let img = root
         .images
         .get(source)
@@ -159,7 +190,15 @@ fn texture_image(
             let dir = base.ok_or_else(|| format!("external image '{uri}' without a directory"))?;
             let file = urlencoding::decode(uri)
                 .map_err(|_| format!("image URI '{uri}' is not valid UTF-8"))?;
-            let path = dir.join(file.as_ref());
+            let rel = Path::new(file.as_ref());
+            if rel.is_absolute()
+                || rel
+                    .components()
+                    .any(|c| c == std::path::Component::ParentDir)
+            {
+                return Err(format!("image '{uri}' lies outside the model's directory"));
+            }
+            let path = dir.join(rel);
             let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
             (file.into_owned(), bytes)
         }

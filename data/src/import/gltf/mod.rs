@@ -43,7 +43,11 @@ use std::path::Path;
 const MAX_DEPTH: usize = 256;
 
 /// Extensions whose data this importer decodes.
-const DECODED: &[&str] = &["KHR_mesh_quantization", buffers::MESHOPT];
+const DECODED: &[&str] = &[
+    "KHR_mesh_quantization",
+    buffers::MESHOPT,
+    "KHR_texture_transform",
+];
 
 /// Imports a `.gltf` (with external or embedded buffers) or `.glb` file. Errors name the file
 /// and the element at fault.

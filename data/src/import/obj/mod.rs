@@ -206,8 +206,11 @@ fn material_texture(
         let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
         decode(file, &bytes, [Wrap::Repeat; 2]).map_err(|e| format!("{}: {e}", path.display()))
     };
-    if let Some(i) = textures.iter().position(|t| t.name == file) {
-        return (Some(i as u32), m.dissolve_texture.is_some());
+    // A map is shared by the materials that name it, unless one adds its own map_d mask.
+    if m.dissolve_texture.is_none()
+        && let Some(i) = textures.iter().position(|t| t.name == file)
+    {
+        return (Some(i as u32), false);
     }
     let mut img = match load(file) {
         Ok(img) => img,
@@ -258,7 +261,7 @@ fn map_path(dir: &Path, file: &str) -> std::path::PathBuf {
         .iter()
         .find(|p| p.is_file())
         .cloned()
-        .unwrap_or_else(|| candidates.swap_remove(2))
+        .unwrap_or_else(|| dir.join(last))
 }
 
 /// A reader that hands out at most one line per `fill_buf`, so that when the parser fails,
