@@ -50,27 +50,7 @@ impl Materials {
         globals: &wgpu::BindGroupLayout,
         samples: u32,
     ) -> Materials {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("base colour"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-            ],
-        });
+        let layout = crate::pipeline::texture_layout(device, "base colour");
         let shader = device.create_shader_module(wgpu::include_wgsl!("shader.wgsl"));
         let textured_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("textured"),
@@ -163,20 +143,8 @@ impl Materials {
             ..Default::default()
         });
         let tv = texture.create_view(&Default::default());
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("base colour"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&tv),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::Sampler(&sampler),
-                },
-            ],
-        });
+        let bind_group =
+            crate::pipeline::texture_bind_group(device, &self.layout, "base colour", &tv, &sampler);
         let bytes = view.texels.len() as u64;
         Ok(GpuTexture {
             bind_group,

@@ -48,27 +48,7 @@ impl Textured {
     /// Creates the pipeline; `globals` is the walkthrough pipeline's group 0 layout, `samples`
     /// the targets' samples per pixel.
     pub fn new(device: &wgpu::Device, globals: &wgpu::BindGroupLayout, samples: u32) -> Textured {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("impostor atlas"),
-            entries: &[
-                wgpu::BindGroupLayoutEntry {
-                    binding: 0,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Texture {
-                        sample_type: wgpu::TextureSampleType::Float { filterable: true },
-                        view_dimension: wgpu::TextureViewDimension::D2,
-                        multisampled: false,
-                    },
-                    count: None,
-                },
-                wgpu::BindGroupLayoutEntry {
-                    binding: 1,
-                    visibility: wgpu::ShaderStages::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-            ],
-        });
+        let layout = crate::pipeline::texture_layout(device, "impostor atlas");
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("impostor atlas"),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
@@ -145,20 +125,13 @@ impl Textured {
             img.as_raw(),
         );
         let view = texture.create_view(&Default::default());
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("impostor atlas"),
-            layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: wgpu::BindingResource::TextureView(&view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::Sampler(&self.sampler),
-                },
-            ],
-        });
+        let bind_group = crate::pipeline::texture_bind_group(
+            device,
+            &self.layout,
+            "impostor atlas",
+            &view,
+            &self.sampler,
+        );
         let (vertices, indices) = box_mesh(bounds, tile);
         let vertex = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("impostor box"),
