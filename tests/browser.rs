@@ -190,12 +190,8 @@ fn native_view(db: &Path, eye: [f32; 3], dir: [f32; 3]) -> image::RgbaImage {
         .instances
         .iter()
         .zip(&meshes)
-        .map(|(inst, mesh)| portico_render::Draw {
-            mesh,
-            transform: glam::Mat4::from_cols_array(&inst.transform),
-            color: [1.0; 4],
-            texture: None,
-            alpha: Default::default(),
+        .map(|(inst, mesh)| {
+            portico_render::Draw::new(mesh, glam::Mat4::from_cols_array(&inst.transform), [1.0; 4])
         })
         .collect();
     r.render_to_image(&vp.camera, &draws).unwrap().1

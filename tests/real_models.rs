@@ -217,12 +217,8 @@ fn a_frame_in_each_room_of_the_ifc_house_shows_that_room() {
                 .iter()
                 .zip(&meshes)
                 .filter(|(i, _)| !only_room || touches(&i.bounds))
-                .map(|(i, mesh)| Draw {
-                    mesh,
-                    transform: glam::Mat4::from_cols_array(&i.transform),
-                    color: [1.0; 4],
-                    texture: None,
-                    alpha: Default::default(),
+                .map(|(i, mesh)| {
+                    Draw::new(mesh, glam::Mat4::from_cols_array(&i.transform), [1.0; 4])
                 })
                 .collect()
         };

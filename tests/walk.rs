@@ -126,13 +126,7 @@ fn full_detail(
         .instances
         .iter()
         .zip(&meshes)
-        .map(|(i, mesh)| Draw {
-            mesh,
-            transform: glam::Mat4::from_cols_array(&i.transform),
-            color: [1.0; 4],
-            texture: None,
-            alpha: Default::default(),
-        })
+        .map(|(i, mesh)| Draw::new(mesh, glam::Mat4::from_cols_array(&i.transform), [1.0; 4]))
         .collect();
     let (eye, dir) = path.sample(0.0);
     let camera = Camera {

@@ -52,16 +52,7 @@ fn observers(p: &Prefetcher) -> Vec<Observer> {
     {
         let mid = Vec3::from(c.bounds.min).lerp(Vec3::from(c.bounds.max), 0.5);
         let dir = [[1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]][i % 3];
-        out.push(Observer {
-            eye: mid.into(),
-            dir,
-            up: [0.0, 1.0, 0.0],
-            velocity: [0.0; 3],
-            half_fov_x: 0.6,
-            half_fov_y: 0.45,
-            max_speed: 1.5,
-            max_turn: 1.0,
-        });
+        out.push(common::observer(mid, dir));
     }
     out
 }

@@ -9,6 +9,8 @@ use portico_data::import::import_file;
 use portico_data::texture::{TextureView, Wrap};
 use std::path::{Path, PathBuf};
 
+mod common;
+
 const MODELS: &str = "/usr/share/assimp/models";
 
 fn model(rel: &str) -> PathBuf {
@@ -141,37 +143,13 @@ fn a_built_database_holds_each_texture_coarse_first_as_whole_mip_chains() {
     assert!(avg.iter().take(3).all(|c| (0.0..=1.0).contains(c)));
 }
 
-/// The tiny building (one storey) with the generator's textured materials, built and opened
-/// for prefetch answers.
-fn textured_tiny() -> portico_data::prefetch::Prefetcher {
-    let dir = tempfile::tempdir().unwrap();
-    let params = portico_generator::Params {
-        preset: portico_generator::Preset::Tiny,
-        seed: 5,
-        floors: Some(1),
-    };
-    let b = portico_generator::generate(&params, &mut |_| {}).unwrap();
-    let glb = dir.path().join("tiny.glb");
-    std::fs::write(&glb, portico_generator::with_textures(&b.glb).unwrap()).unwrap();
-    let out = dir.path().join("tiny.portico");
-    build(
-        import_file(&glb).unwrap(),
-        &out,
-        &BuildOptions::default(),
-        &Quiet,
-    )
-    .unwrap();
-    let db = std::sync::Arc::new(Database::open(&out).unwrap());
-    portico_data::prefetch::Prefetcher::new(db).unwrap()
-}
-
 /// Prefetch answers list each texture coarse first, with the first object that needs it, before
 /// any finer level of that texture and before the finer LODs of the objects drawn with it; a
 /// texture's finer segments come after its coarse one, never instead of it.
 #[test]
 fn prefetch_brings_coarse_mips_with_the_geometry_that_needs_them() {
-    use portico_protocol::{NeedKind, Observer, Policy, RangeCull};
-    let p = textured_tiny();
+    use portico_protocol::{NeedKind, Policy, RangeCull};
+    let p = common::prefetcher_for(5, 1, true, &BuildOptions::default(), None);
     let h = p.database().header();
     assert_eq!(h.textures.len(), 4, "brick, wood, carpet, tiles");
     let texture_of_segment = |s: u32| {
@@ -191,16 +169,7 @@ fn prefetch_brings_coarse_mips_with_the_geometry_that_needs_them() {
     let mut mips_seen = 0;
     for c in g.cells.iter().filter(|c| c.live) {
         let mid = glam::Vec3::from(c.bounds.min).lerp(glam::Vec3::from(c.bounds.max), 0.5);
-        let obs = Observer {
-            eye: mid.into(),
-            dir: [1.0, 0.0, 0.0],
-            up: [0.0, 1.0, 0.0],
-            velocity: [0.0; 3],
-            half_fov_x: 0.6,
-            half_fov_y: 0.45,
-            max_speed: 1.5,
-            max_turn: 1.0,
-        };
+        let obs = common::observer(mid, [1.0, 0.0, 0.0]);
         let a = p.answer(&obs, &policy, &Default::default()).unwrap();
         let mut first_at = std::collections::HashMap::new();
         for (i, item) in a.items.iter().enumerate() {

@@ -17,13 +17,7 @@ impl Renderer {
         counts: &[u32],
     ) -> Result<Vec<(u64, u64, f64)>, RenderError> {
         let view_proj = fit_to_patch(&mesh.bounds(), 0.1);
-        let draw = Draw {
-            mesh,
-            transform: Mat4::IDENTITY,
-            color: [1.0; 4],
-            texture: None,
-            alpha: Default::default(),
-        };
+        let draw = Draw::new(mesh, Mat4::IDENTITY, [1.0; 4]);
         self.render_view_proj(view_proj, &[draw])?; // warm-up: first use compiles state
         counts
             .iter()
@@ -107,14 +101,12 @@ pub(crate) fn fill_layers(quad: &GpuMesh, coverage: f32) -> Vec<Draw<'_>> {
     (0..FILL_LAYERS)
         .map(|k| {
             let z = 0.9 - 0.8 * k as f32 / FILL_LAYERS as f32;
-            Draw {
-                mesh: quad,
-                transform: Mat4::from_translation(Vec3::new(0.0, 0.0, z))
+            Draw::new(
+                quad,
+                Mat4::from_translation(Vec3::new(0.0, 0.0, z))
                     * Mat4::from_scale(Vec3::new(s, s, 1.0)),
-                color: [1.0; 4],
-                texture: None,
-                alpha: Default::default(),
-            }
+                [1.0; 4],
+            )
         })
         .collect()
 }

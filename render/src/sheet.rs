@@ -143,21 +143,9 @@ pub fn birdseye(r: &mut Renderer, db: &Database, path: &CameraPath) -> Result<Bi
     marks.push((mark(path.duration(), 1.2, 0.2), END_COLOUR));
     let mut draws: Vec<Draw> = meshes
         .iter()
-        .map(|(m, t, c)| Draw {
-            mesh: m,
-            transform: *t,
-            color: *c,
-            texture: None,
-            alpha: Default::default(),
-        })
+        .map(|(m, t, c)| Draw::new(m, *t, *c))
         .collect();
-    draws.extend(marks.iter().map(|(t, c)| Draw {
-        mesh: &marker,
-        transform: *t,
-        color: *c,
-        texture: None,
-        alpha: Default::default(),
-    }));
+    draws.extend(marks.iter().map(|(t, c)| Draw::new(&marker, *t, *c)));
     let (view_proj, half_w) = top_down(db, cut, r.aspect());
     let image = r
         .picture_view_proj(view_proj, &draws, &[])

@@ -44,13 +44,7 @@ fn square(half: f32) -> Mesh {
 }
 
 fn at(mesh: &GpuMesh, offset: Vec3, color: [f32; 4]) -> Draw<'_> {
-    Draw {
-        mesh,
-        transform: Mat4::from_translation(offset),
-        color,
-        texture: None,
-        alpha: Default::default(),
-    }
+    Draw::new(mesh, Mat4::from_translation(offset), color)
 }
 
 /// The pixel a world point projects to.

@@ -151,13 +151,7 @@ fn a_textured_box_seen_from_a_capture_direction_matches_its_objects() {
         let vp = face_view(&node.bounds, face);
         let draws: Vec<Draw> = meshes
             .iter()
-            .map(|(m, inst, color)| Draw {
-                mesh: m,
-                transform: Mat4::from_cols_array(&inst.transform),
-                color: *color,
-                texture: None,
-                alpha: Default::default(),
-            })
+            .map(|(m, inst, color)| Draw::new(m, Mat4::from_cols_array(&inst.transform), *color))
             .collect();
         r.render_view_proj(vp, &draws).unwrap();
         let objects = r.read_pixels().unwrap();

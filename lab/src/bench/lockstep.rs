@@ -215,13 +215,7 @@ impl<'a> Bench<'a> {
                 (Stand::Textured, Some(t)) => textured.push(t),
                 _ => {
                     if let Some(mesh) = scene.colour_boxes.get(n as usize) {
-                        draws.push(Draw {
-                            mesh,
-                            transform: Mat4::IDENTITY,
-                            color: [1.0; 4],
-                            texture: None,
-                            alpha: Default::default(),
-                        });
+                        draws.push(Draw::new(mesh, Mat4::IDENTITY, [1.0; 4]));
                     }
                 }
             }
