@@ -122,8 +122,12 @@ impl Traversal {
                 let px = f64::from(c.pixels);
                 Some((
                     l,
-                    f.cost
-                        .cost(u64::from(lod.triangles), u64::from(lod.vertices), px),
+                    f.cost.cost_of(
+                        u64::from(lod.triangles),
+                        u64::from(lod.vertices),
+                        px,
+                        lod.textured(),
+                    ),
                 ))
             })
             .collect();
@@ -290,10 +294,11 @@ fn upgrade(
             if !lod.resident {
                 continue;
             }
-            let cost = f.cost.cost(
+            let cost = f.cost.cost_of(
                 u64::from(lod.triangles),
                 u64::from(lod.vertices),
                 f64::from(c.pixels),
+                lod.textured(),
             );
             if total - coarse_cost + cost <= f.budget_s {
                 pick = (l, cost);
@@ -313,12 +318,7 @@ mod tests {
     use portico_data::geometry::Aabb;
 
     fn lod(triangles: u32) -> LodOption {
-        LodOption {
-            triangles,
-            vertices: triangles,
-            error: 0.0,
-            resident: true,
-        }
+        LodOption::new(triangles, triangles, 0.0, true)
     }
 
     /// Two rooms of four objects each, 10 m apart.

@@ -234,14 +234,13 @@ pub fn candidates(
         .iter()
         .filter_map(|&o| {
             let inst = header.instances.get(o as usize)?;
+            let texels = resident_texels(header, inst, resident);
             let lods: Vec<LodOption> = header
                 .lods_of(inst)
                 .iter()
                 .map(|l| LodOption {
-                    triangles: l.triangles,
-                    vertices: l.vertices,
-                    error: l.error,
-                    resident: resident(l.segment),
+                    texels: texels.map(|t| if l.uv { t } else { 0.0 }),
+                    ..LodOption::new(l.triangles, l.vertices, l.error, resident(l.segment))
                 })
                 .collect();
             let pixels = screen_pixels(&inst.bounds, &v.view_proj, v.size.0, v.size.1);
@@ -252,6 +251,28 @@ pub fn candidates(
             Some(c)
         })
         .collect()
+}
+
+/// A textured instance's texels over the whole object at the finest resident mip level (0 with
+/// none resident: it draws in the average colour); `None` for an untextured instance
+/// ([`LodOption::texels`]).
+fn resident_texels(
+    header: &Header,
+    inst: &portico_data::format::InstanceRecord,
+    resident: &dyn Fn(u32) -> bool,
+) -> Option<f32> {
+    let t = header.texture_of(inst)?;
+    let span = header
+        .objects
+        .get(inst.object as usize)
+        .map_or(1.0, |o| o.uv_span);
+    let span = if span.is_finite() && span > 0.0 {
+        span
+    } else {
+        1.0
+    };
+    let finest = t.segments.iter().rev().find(|s| resident(s.segment));
+    Some(finest.map_or(0.0, |s| s.width as f32 * s.height as f32 * span * span))
 }
 
 /// Funkhouser ran his prefetch experiments (§5.3) with the optimizing elider "combined with a
@@ -310,12 +331,7 @@ mod tests {
 
     #[test]
     fn detail_is_capped_at_the_size_threshold() {
-        let lod = |triangles| LodOption {
-            triangles,
-            vertices: triangles,
-            error: 0.0,
-            resident: true,
-        };
+        let lod = |triangles| LodOption::new(triangles, triangles, 0.0, true);
         let lods = vec![lod(1000), lod(100), lod(10)];
         let mut cands = vec![
             Candidate::new(0, lods.clone(), 16_000.0), // 16 px per triangle at the finest

@@ -1,8 +1,11 @@
 //! Timed sample draws for the cost model (Funkhouser §4.2.3): `C1·polys + C2·verts` from frames
-//! of many small draws squeezed into a patch, `C3·pixels` from overlapping screen-aligned quads;
-//! [`calibrate`] fits them at start-up, for the walk and the benchmark alike.
+//! of many small draws squeezed into a patch, `C3·pixels` from overlapping screen-aligned quads,
+//! `C4·pixels` from the same quads textured; [`calibrate`] fits them at start-up, for the walk
+//! and the benchmark alike.
 
-use crate::{Draw, FILL_LAYERS, FrameTiming, GpuMesh, RenderError, Renderer, SAMPLE_REPEATS};
+use crate::{
+    Draw, FILL_LAYERS, FrameTiming, GpuMesh, GpuTexture, RenderError, Renderer, SAMPLE_REPEATS,
+};
 use glam::{Mat4, Vec3};
 use portico_client::cost::CostModel;
 use portico_data::geometry::{Aabb, Mesh, Vertex, encode_geometry};
@@ -33,14 +36,44 @@ impl Renderer {
     /// fraction of the screen. Returns `(pixels written, seconds)` per coverage, for fitting
     /// `C3·pixels` (§4.2.3).
     pub fn sample_fill(&mut self, coverage: &[f32]) -> Result<Vec<(f64, f64)>, RenderError> {
-        let quad = self.upload(&portico_data::geometry::encode_geometry(&unit_quad()))?;
+        self.sample_fill_with(coverage, None)
+    }
+
+    /// [`Renderer::sample_fill`] with the quads textured by a 256 × 256 mip-mapped checker
+    /// repeated twice across each (about a texel per pixel at 640 × 480): for fitting
+    /// `(C3 + C4)·pixels`.
+    pub fn sample_textured_fill(
+        &mut self,
+        coverage: &[f32],
+    ) -> Result<Vec<(f64, f64)>, RenderError> {
+        let texture = checker_texture(self)?;
+        self.sample_fill_with(coverage, Some(&texture))
+    }
+
+    fn sample_fill_with(
+        &mut self,
+        coverage: &[f32],
+        texture: Option<&GpuTexture>,
+    ) -> Result<Vec<(f64, f64)>, RenderError> {
+        let mut mesh = unit_quad();
+        if texture.is_some() {
+            mesh.uvs = vec![[0.0, 0.0], [2.0, 0.0], [2.0, 2.0], [0.0, 2.0]];
+        }
+        let quad = self.upload(&portico_data::geometry::encode_geometry(&mesh))?;
         let screen = f64::from(self.width) * f64::from(self.height);
-        self.render_view_proj(Mat4::IDENTITY, &[])?; // warm-up
+        let warm: Vec<Draw<'_>> = fill_layers(&quad, 0.01)
+            .into_iter()
+            .map(|d| Draw { texture, ..d })
+            .collect();
+        self.render_view_proj(Mat4::IDENTITY, &warm)?; // warm-up: first use compiles state
         coverage
             .iter()
             .map(|&c| {
                 let c = c.clamp(0.0, 1.0);
-                let draws = fill_layers(&quad, c);
+                let draws: Vec<Draw<'_>> = fill_layers(&quad, c)
+                    .into_iter()
+                    .map(|d| Draw { texture, ..d })
+                    .collect();
                 let t = self.fastest_frame(Mat4::IDENTITY, &draws)?;
                 Ok((
                     (f64::from(c) * screen).round() * FILL_LAYERS as f64,
@@ -80,6 +113,25 @@ pub(crate) fn fit_to_patch(bounds: &Aabb, half: f32) -> Mat4 {
         * Mat4::from_translation(-bounds.center())
 }
 
+/// A 256 × 256 black-and-white checker of 32-texel squares with its full mip chain, repeating.
+fn checker_texture(r: &Renderer) -> Result<GpuTexture, RenderError> {
+    use portico_data::texture::{Wrap, cut_segments, mip_chain};
+    let side = 256u32;
+    let rgba: Vec<u8> = (0..side * side)
+        .flat_map(|i| {
+            let (x, y) = (i % side, i / side);
+            let v = if (x / 32 + y / 32) % 2 == 0 { 230 } else { 25 };
+            [v, v, v, 255]
+        })
+        .collect();
+    let chain = mip_chain(side, side, &rgba);
+    let finest = cut_segments(side, side, &chain)
+        .pop()
+        .map(|s| s.3)
+        .unwrap_or_default();
+    r.upload_texture(&finest, [Wrap::Repeat; 2])
+}
+
 /// A quad covering NDC `[-1, 1]²` at z = 0, facing +z, white.
 pub(crate) fn unit_quad() -> portico_data::geometry::Mesh {
     let corner = |x: f32, y: f32| Vertex::new([x, y, 0.0], [0.0, 0.0, 1.0], [1.0; 4]);
@@ -111,9 +163,9 @@ pub(crate) fn fill_layers(quad: &GpuMesh, coverage: f32) -> Vec<Draw<'_>> {
         .collect()
 }
 
-/// Funkhouser §4.2.3: C1, C2, C3 from timed sample draws at start-up (the walk and the
-/// benchmark both start this way): a 24 × 24 grid patch drawn 1 to 128 times, and full-screen
-/// quads at three coverages.
+/// Funkhouser §4.2.3: C1, C2, C3 and our C4 from timed sample draws at start-up (the walk and
+/// the benchmark both start this way): a 24 × 24 grid patch drawn 1 to 128 times, and
+/// full-screen quads at three coverages, plain and textured.
 pub fn calibrate(r: &mut Renderer) -> Result<CostModel, RenderError> {
     let n = 24u32;
     let mut mesh = Mesh::default();
@@ -134,5 +186,6 @@ pub fn calibrate(r: &mut Renderer) -> Result<CostModel, RenderError> {
     let gpu = r.upload(&encode_geometry(&mesh))?;
     let geometry = r.sample_costs(&gpu, &[1, 16, 64, 128])?;
     let fill = r.sample_fill(&[0.25, 0.5, 1.0])?;
-    Ok(CostModel::calibrate(&geometry, &fill))
+    let textured = r.sample_textured_fill(&[0.25, 0.5, 1.0])?;
+    Ok(CostModel::calibrate(&geometry, &fill, &textured))
 }

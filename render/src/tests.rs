@@ -218,6 +218,20 @@ fn calibration_samples_report_work_and_time() {
         img.pixels().all(|p| *p != sky),
         "full coverage leaves no sky"
     );
+    // The textured samples really sample the checker: dark and light texels on screen.
+    let textured = r.sample_textured_fill(&[0.25, 1.0]).expect("textured fill");
+    assert_eq!(
+        textured.iter().map(|f| f.0).collect::<Vec<_>>(),
+        [0.25 * screen, screen]
+    );
+    let img = r.read_pixels().expect("last textured frame");
+    let dark = img.pixels().filter(|p| p[0] < 60).count();
+    let light = img.pixels().filter(|p| p[0] > 160).count();
+    let n = (W * H) as usize;
+    assert!(
+        dark > n / 5 && light > n / 5,
+        "dark {dark}, light {light} of {n}"
+    );
 }
 
 /// A box from `min` to `max` with outward normals, as the generator's `add_box` makes it.

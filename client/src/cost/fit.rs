@@ -79,11 +79,36 @@ impl CostModel {
         }
     }
 
-    /// Start-up calibration: [`CostModel::default`] refined by [`CostModel::fit_geometry`] and
-    /// [`CostModel::fit_fill`]; any part the samples cannot determine keeps its default. A
-    /// successful geometry fit sets `c0 = 0`, since its slopes already include the per-draw
-    /// overhead of the repeated sample draws.
-    pub fn calibrate(geometry: &[(u64, u64, f64)], fill: &[(f64, f64)]) -> CostModel {
+    /// Fits `seconds ≈ overhead + (c3 + c4)·pixels` to `(pixels, seconds)` samples of textured
+    /// fill-bound draws, keeping every other coefficient: `c4` is the fitted slope less `c3`
+    /// (never negative). Degenerate samples leave `self` unchanged (`fitted: false`).
+    pub fn fit_textured_fill(&self, samples: &[(f64, f64)]) -> Fit {
+        let rows = samples.iter().map(|&(p, s)| ([1.0, p], s));
+        let solved = solve_nnls(rows);
+        match solved.filter(|s| s.x[1] > 0.0) {
+            Some(s) => Fit {
+                model: CostModel {
+                    c4: (s.x[1] - self.c3).max(0.0),
+                    ..*self
+                },
+                overhead_s: s.x[0],
+                rms_error_s: s.rms,
+                fitted: true,
+            },
+            None => self.unfitted(),
+        }
+    }
+
+    /// Start-up calibration: [`CostModel::default`] refined by [`CostModel::fit_geometry`],
+    /// [`CostModel::fit_fill`] and [`CostModel::fit_textured_fill`] (`textured` may be empty);
+    /// any part the samples cannot determine keeps its default. A successful geometry fit sets
+    /// `c0 = 0`, since its slopes already include the per-draw overhead of the repeated sample
+    /// draws.
+    pub fn calibrate(
+        geometry: &[(u64, u64, f64)],
+        fill: &[(f64, f64)],
+        textured: &[(f64, f64)],
+    ) -> CostModel {
         let prior = CostModel {
             c0: 0.0,
             ..CostModel::default()
@@ -94,7 +119,8 @@ impl CostModel {
         } else {
             CostModel::default()
         };
-        model.fit_fill(fill).model
+        let model = model.fit_fill(fill).model;
+        model.fit_textured_fill(textured).model
     }
 
     fn unfitted(&self) -> Fit {

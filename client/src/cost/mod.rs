@@ -4,13 +4,17 @@
 //! pixel*, so an object tuple takes as long as its slower stage:
 //!
 //! ```text
-//! Cost(O, L) = max(C0 + C1·Poly(O, L) + C2·Vert(O, L),  C3·Pix(O))        [seconds]
+//! Cost(O, L) = max(C0 + C1·Poly(O, L) + C2·Vert(O, L),  (C3 + C4·Tex(O, L))·Pix(O))  [seconds]
 //! ```
 //!
-//! `C0` is our addition: the fixed host-side overhead of one draw call, which matters on today's
-//! APIs when thousands of small objects are drawn. The coefficients are found "experimentally by
+//! `C0` and `C4` are our additions. `C0` is the fixed host-side overhead of one draw call, which
+//! matters on today's APIs when thousands of small objects are drawn. `C4` is what texturing
+//! adds to each pixel (`Tex` is 1 when the LOD draws with a texture, else 0): sampling and
+//! filtering a mip chain doubles the per-pixel time of a software rasteriser, and Funkhouser's
+//! pixels were flat- or Gouraud-shaded. The coefficients are found "experimentally by
 //! rendering sample objects with a wide variety of sizes and LODs" (§4.2.3, Fig. 4.15):
-//! [`CostModel::fit_geometry`], [`CostModel::fit_draws`] and [`CostModel::fit_fill`] solve small
+//! [`CostModel::fit_geometry`], [`CostModel::fit_draws`], [`CostModel::fit_fill`] and
+//! [`CostModel::fit_textured_fill`] solve small
 //! non-negative least-squares problems over timed samples (the client times them at start-up).
 //! Funkhouser hoped "to extend our system to learn appropriate cost coefficients during real-time
 //! walkthroughs"; [`OnlineCost`] does that with a smoothed correction factor refitted from
@@ -32,7 +36,7 @@ pub const MAX_FACTOR: f64 = 4.0;
 
 /// Coefficients of Funkhouser's cost model (§4.2.3), all in seconds per unit.
 ///
-/// `Cost = max(c0 + c1·triangles + c2·vertices, c3·pixels)`.
+/// `Cost = max(c0 + c1·triangles + c2·vertices, (c3 + c4·textured)·pixels)`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct CostModel {
     /// Seconds of fixed overhead per draw call (state setup, command encoding).
@@ -43,18 +47,23 @@ pub struct CostModel {
     pub c2: f64,
     /// Seconds per covered pixel in the per-pixel stage (Funkhouser's `C3`).
     pub c3: f64,
+    /// Seconds a texture adds to each covered pixel (sampling and filtering its mip chain);
+    /// models calibrated before textures existed read it as 0.
+    #[serde(default)]
+    pub c4: f64,
 }
 
 impl Default for CostModel {
     /// Speeds of a software rasteriser (llvmpipe on a few cores): about 8 M triangles/s for
     /// indexed meshes with half as many vertices as triangles, 50 M vertices/s, 400 M pixels/s,
-    /// 5 µs per draw.
+    /// 5 µs per draw; a texture doubles the per-pixel time.
     fn default() -> Self {
         CostModel {
             c0: 5.0e-6,
             c1: 1.15e-7,
             c2: 2.0e-8,
             c3: 2.5e-9,
+            c4: 2.5e-9,
         }
     }
 }
@@ -89,9 +98,15 @@ pub struct Fit {
 
 impl CostModel {
     /// Estimated seconds to draw an object of `tris` triangles and `verts` vertices covering
-    /// `pixels` pixels: `max(c0 + c1·tris + c2·verts, c3·pixels)` (§4.2.3). A draw of zero
-    /// triangles draws nothing and costs 0.
+    /// `pixels` pixels, untextured: `max(c0 + c1·tris + c2·verts, c3·pixels)` (§4.2.3). A draw
+    /// of zero triangles draws nothing and costs 0.
     pub fn cost(&self, tris: u64, verts: u64, pixels: f64) -> f64 {
+        self.cost_of(tris, verts, pixels, false)
+    }
+
+    /// [`CostModel::cost`] of a draw that samples a texture when `textured`:
+    /// `max(c0 + c1·tris + c2·verts, (c3 + c4)·pixels)`.
+    pub fn cost_of(&self, tris: u64, verts: u64, pixels: f64, textured: bool) -> f64 {
         if tris == 0 {
             return 0.0;
         }
@@ -101,7 +116,8 @@ impl CostModel {
             0.0
         };
         let geometry = self.c0 + self.c1 * tris as f64 + self.c2 * verts as f64;
-        geometry.max(self.c3 * pixels)
+        let per_pixel = if textured { self.c3 + self.c4 } else { self.c3 };
+        geometry.max(per_pixel * pixels)
     }
 
     /// Triangles per second this model predicts for geometry-bound meshes with half as many
@@ -122,6 +138,7 @@ impl CostModel {
             c1: self.c1 * factor,
             c2: self.c2 * factor,
             c3: self.c3 * factor,
+            c4: self.c4 * factor,
         }
     }
 }

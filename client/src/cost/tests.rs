@@ -14,6 +14,7 @@ const TRUTH: CostModel = CostModel {
     c1: 2.0e-7,
     c2: 5.0e-8,
     c3: 4.0e-9,
+    c4: 3.0e-9,
 };
 
 fn geometry_samples(rng: &mut SmallRng, overhead: f64, noise: f64) -> Vec<(u64, u64, f64)> {
@@ -40,6 +41,19 @@ fn cost_is_max_of_geometry_and_fill() {
     let fill = m.c3 * 1.0e7;
     assert!(fill > geometry);
     assert_eq!(m.cost(1000, 500, 1.0e7), fill);
+}
+
+#[test]
+fn a_texture_adds_to_the_fill_stage_only() {
+    let m = TRUTH;
+    let geometry = m.c0 + m.c1 * 1000.0 + m.c2 * 500.0;
+    // Geometry-bound: texturing changes nothing.
+    assert_eq!(m.cost_of(1000, 500, 10.0, true), geometry);
+    // Fill-bound: (c3 + c4) per pixel, and the untextured cost is `cost`.
+    assert_eq!(m.cost_of(1000, 500, 1.0e7, true), (m.c3 + m.c4) * 1.0e7);
+    assert_eq!(m.cost_of(1000, 500, 1.0e7, false), m.cost(1000, 500, 1.0e7));
+    assert_eq!(m.cost_of(0, 0, 1.0e7, true), 0.0);
+    assert_eq!(m.scaled(2.0).c4, 2.0 * m.c4);
 }
 
 #[test]
@@ -183,21 +197,31 @@ fn degenerate_input_keeps_a_finite_prior() {
     assert_eq!(prior.fit_draws(&[]).model, prior);
     let constant = prior.fit_geometry(&[(10, 5, 1.0e-3), (1000, 500, 1.0e-3)]);
     assert!(!constant.fitted, "no slope: keep the prior");
-    let m = CostModel::calibrate(&[], &[]);
-    assert!([m.c0, m.c1, m.c2, m.c3].iter().all(|c| c.is_finite()));
+    assert_eq!(prior.fit_textured_fill(&[]).model, prior);
+    assert_eq!(prior.fit_textured_fill(&[(1.0e5, f64::NAN)]).model, prior);
+    let m = CostModel::calibrate(&[], &[], &[]);
+    assert!([m.c0, m.c1, m.c2, m.c3, m.c4].iter().all(|c| c.is_finite()));
 }
 
 #[test]
 fn calibrate_combines_geometry_and_fill() {
     let geometry = geometry_samples(&mut SmallRng::seed_from_u64(13), 0.0, 0.0);
     let fill = [(1.0e5, TRUTH.c3 * 1.0e5), (1.0e6, TRUTH.c3 * 1.0e6)];
-    let m = CostModel::calibrate(&geometry, &fill);
+    let per_pixel = TRUTH.c3 + TRUTH.c4;
+    let textured = [
+        (1.0e5, 2e-4 + per_pixel * 1.0e5),
+        (1.0e6, 2e-4 + per_pixel * 1.0e6),
+    ];
+    let m = CostModel::calibrate(&geometry, &fill, &textured);
     assert!(
-        close(m.c1, TRUTH.c1, 0.05) && close(m.c3, TRUTH.c3, 0.05),
+        close(m.c1, TRUTH.c1, 0.05) && close(m.c3, TRUTH.c3, 0.05) && close(m.c4, TRUTH.c4, 0.05),
         "{m:?}"
     );
     assert_eq!(m.c0, 0.0, "per-draw overhead is inside the fitted slopes");
-    assert_eq!(CostModel::calibrate(&[], &[]), CostModel::default());
+    assert_eq!(CostModel::calibrate(&[], &[], &[]), CostModel::default());
+    // Texturing faster than plain fill (noise) is not a negative cost.
+    let cheap = [(1.0e5, TRUTH.c3 * 0.5e5), (1.0e6, TRUTH.c3 * 0.5e6)];
+    assert_eq!(TRUTH.fit_textured_fill(&cheap).model.c4, 0.0);
 }
 
 #[test]

@@ -21,6 +21,29 @@ pub fn accuracy(params: &Params, triangles: u32, pixels: f32) -> f64 {
     1.0 - params.base_error / denominator
 }
 
+/// `Texture = 1 − BaseError / Texels^m` with `Texels = min(texels, pixels)` (at least 1): the
+/// texture's share of a LOD's accuracy, by the sampling argument of Funkhouser's `Accuracy`
+/// (§4.2.3) applied to texels. `texels` is [`LodOption::texels`]: `None` (untextured) gives 1,
+/// the average colour (0 texels) `1 − BaseError`.
+pub fn texture_accuracy(params: &Params, texels: Option<f32>, pixels: f32) -> f64 {
+    let Some(texels) = texels else {
+        return 1.0;
+    };
+    let samples = finite_or_zero(texels).min(finite_or_zero(pixels)).max(1.0);
+    let denominator = if params.exponent == 1.0 {
+        samples
+    } else {
+        samples.powf(params.exponent)
+    };
+    1.0 - params.base_error / denominator
+}
+
+/// Accuracy of drawing `lod` over `pixels` pixels: [`accuracy`] of its triangles times
+/// [`texture_accuracy`] of its texels.
+pub fn lod_accuracy(params: &Params, lod: &LodOption, pixels: f32) -> f64 {
+    accuracy(params, lod.triangles, pixels) * texture_accuracy(params, lod.texels, pixels)
+}
+
 /// The LOD-independent factors of the benefit: `Size · Importance · Focus · Motion` (§4.2.3).
 pub fn object_weight(params: &Params, cand: &Candidate) -> f64 {
     let size = finite_or_zero(cand.pixels);
@@ -57,15 +80,16 @@ pub(super) fn previous_accuracy(
         Some(l) => cand
             .lods
             .get(l)
-            .map(|lod| accuracy(params, lod.triangles, cand.pixels)),
+            .map(|lod| lod_accuracy(params, lod, cand.pixels)),
     }
 }
 
 pub(super) fn lod_cost(model: &CostModel, lod: &LodOption, pixels: f32) -> f64 {
-    let c = model.cost(
+    let c = model.cost_of(
         u64::from(lod.triangles),
         u64::from(lod.vertices),
         finite_or_zero(pixels),
+        lod.textured(),
     );
     if c.is_finite() {
         c.max(0.0)

@@ -5,7 +5,7 @@
 
 use crate::cost::CostModel;
 
-use super::benefit::{accuracy, hysteresis, lod_cost, object_weight, previous_accuracy};
+use super::benefit::{hysteresis, lod_accuracy, lod_cost, object_weight, previous_accuracy};
 use super::{Candidate, IdMap, Params};
 
 /// What the optimiser needs besides the candidates.
@@ -58,7 +58,7 @@ pub(super) fn object_points(
     for (j, lod) in cand.lods.iter().enumerate().rev() {
         let cost = lod_cost(ctx.model, lod, cand.pixels);
         if cost.is_finite() {
-            let acc = accuracy(ctx.params, lod.triangles, cand.pixels);
+            let acc = lod_accuracy(ctx.params, lod, cand.pixels);
             out.push(Point {
                 lod: j as u32,
                 resident: lod.resident,

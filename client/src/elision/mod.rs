@@ -16,21 +16,29 @@
 //!
 //! ## Cost and benefit (§4.2.3)
 //!
-//! `Cost(O, L)` is [`CostModel::cost`]: `max(C0 + C1·tris + C2·verts, C3·pixels)`. The benefit
-//! of drawing object `O` at LOD `L` is
+//! `Cost(O, L)` is [`CostModel::cost_of`]: `max(C0 + C1·tris + C2·verts, (C3 + C4·Tex)·pixels)`,
+//! `Tex` 1 when the LOD draws with a resident texture. The benefit of drawing object `O` at LOD
+//! `L` is
 //!
 //! ```text
 //! Benefit(O, L)  = Size(O) · Importance(O) · Focus(O) · Motion(O) · Accuracy'(O, L)
 //! Size           = projected pixels of the bounding box
 //! Focus          = 1 − focus_weight  · (1 − focus)        (focus, motion in 0..1)
 //! Motion         = 1 − motion_weight · (1 − motion)
-//! Accuracy(L)    = 1 − BaseError / Samples(L)^m,  Samples = min(triangles, pixels), ≥ 1
+//! Accuracy(L)    = Geometry(L) · Texture(L)
+//! Geometry(L)    = 1 − BaseError / Samples(L)^m,  Samples = min(triangles, pixels), ≥ 1
+//! Texture(L)     = 1 − BaseError / Texels(L)^m,   Texels = min(texels drawn, pixels), ≥ 1
 //! Accuracy'(L)   = Accuracy(L) − h · |Accuracy(L) − Accuracy(previous frame's choice)|
 //! ```
 //!
 //! with Funkhouser's `BaseError = 0.5` and `m = 1` (flat-shading exponent; Samples "never more
 //! than #pixels", so a LOD with more triangles than the object covers pixels adds no benefit
-//! and `Optimize` does not draw it, whatever the budget). Not drawing an object has accuracy 0,
+//! and `Optimize` does not draw it, whatever the budget). `Texture` is our extension of the same
+//! sampling argument to textures (1 for an untextured object): a texture's detail is sampled by
+//! its texels as a shape's is by its triangles, texels finer than the pixels they land on add
+//! nothing (the finest useful mip), and a textured object drawn in its average colour (one
+//! sample) keeps half its accuracy. So `Optimize` prefers a LOD that can show a resident texture
+//! to one that cannot, and a fill-bound textured object pays `C4` for it. Not drawing an object has accuracy 0,
 //! so its benefit is 0, or `−h·Size·…·Accuracy(previous)` when it was drawn last frame. The last factor is Funkhouser's
 //! *Hysteresis*: "reduce the Benefit by an amount proportional to the difference in level of
 //! detail from the previous frame". Measuring that difference in accuracy makes every move away
@@ -89,7 +97,7 @@ mod optimize;
 mod tests;
 mod threshold;
 
-pub use benefit::{accuracy, object_weight};
+pub use benefit::{accuracy, lod_accuracy, object_weight, texture_accuracy};
 pub use threshold::{resident_fallback, static_lod};
 
 use benefit::{hysteresis, lod_cost, previous_accuracy};
@@ -182,6 +190,29 @@ pub struct LodOption {
     pub error: f32,
     /// Whether this LOD is on the GPU now; only resident LODs can be drawn.
     pub resident: bool,
+    /// The texture detail this LOD is drawn with: `None` for an untextured object; for a
+    /// textured one the texels of the finest resident mip level over the whole object (the
+    /// level's width × height × the times the texture repeats across it, squared), 0 when this
+    /// LOD draws the texture's average colour (no coordinates, or nothing resident).
+    pub texels: Option<f32>,
+}
+
+impl LodOption {
+    /// An untextured LOD.
+    pub fn new(triangles: u32, vertices: u32, error: f32, resident: bool) -> Self {
+        LodOption {
+            triangles,
+            vertices,
+            error,
+            resident,
+            texels: None,
+        }
+    }
+
+    /// Whether drawing this LOD samples a texture (its pixels cost `c3 + c4`).
+    pub fn textured(&self) -> bool {
+        self.texels.is_some_and(|t| t > 0.0)
+    }
 }
 
 /// A potentially visible object offered to the elider this frame.
@@ -358,7 +389,7 @@ impl Elider {
         let prev = self.previous_accuracy(cand);
         let acc = lod
             .and_then(|l| cand.lods.get(l))
-            .map_or(0.0, |l| accuracy(&self.params, l.triangles, cand.pixels));
+            .map_or(0.0, |l| lod_accuracy(&self.params, l, cand.pixels));
         object_weight(&self.params, cand) * hysteresis(&self.params, acc, prev)
     }
 

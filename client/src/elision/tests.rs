@@ -7,12 +7,7 @@ use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 
 fn lod(triangles: u32, resident: bool) -> LodOption {
-    LodOption {
-        triangles,
-        vertices: triangles / 2 + 3,
-        error: 0.0,
-        resident,
-    }
+    LodOption::new(triangles, triangles / 2 + 3, 0.0, resident)
 }
 
 /// LODs of `finest`, `finest/4`, … triangles (finest first), all resident.
@@ -76,6 +71,78 @@ fn accuracy_follows_funkhouser() {
     assert_eq!(accuracy(&p, 10_000, 100.0), accuracy(&p, 100, 100.0));
     assert_eq!(accuracy(&p, 0, 100.0), 0.0);
     assert_eq!(accuracy(&p, 50, f32::NAN), 0.5);
+}
+
+#[test]
+fn texture_accuracy_counts_texels_up_to_the_pixels() {
+    let p = Params::default();
+    assert_eq!(texture_accuracy(&p, None, 1000.0), 1.0, "untextured");
+    assert_eq!(
+        texture_accuracy(&p, Some(0.0), 1000.0),
+        0.5,
+        "average colour"
+    );
+    assert_eq!(texture_accuracy(&p, Some(64.0), 1000.0), 1.0 - 0.5 / 64.0);
+    // Texels finer than the pixels they land on add nothing.
+    assert_eq!(
+        texture_accuracy(&p, Some(1.0e6), 100.0),
+        texture_accuracy(&p, Some(100.0), 100.0)
+    );
+    assert_eq!(texture_accuracy(&p, Some(f32::NAN), 100.0), 0.5);
+    let textured = LodOption {
+        texels: Some(0.0),
+        ..lod(100, true)
+    };
+    assert_eq!(lod_accuracy(&p, &textured, 1000.0), 0.995 * 0.5);
+    assert!(!textured.textured() && !lod(100, true).textured());
+}
+
+#[test]
+fn optimize_spends_detail_where_the_texture_shows() {
+    // Two objects alike but for their textures: A's is resident, B's is not (it would draw in
+    // the average colour). Geometry-bound costs, a budget for one finest LOD and one coarse.
+    let model = CostModel {
+        c3: 0.0,
+        c4: 0.0,
+        ..CostModel::default()
+    };
+    let with = |texels: f32| {
+        chain(1000, 2)
+            .into_iter()
+            .map(|l| LodOption {
+                texels: Some(texels),
+                ..l
+            })
+            .collect::<Vec<_>>()
+    };
+    let cands = vec![
+        Candidate::new(0, with(0.0), 50_000.0),
+        Candidate::new(1, with(4096.0), 50_000.0),
+    ];
+    let budget = model.cost(1000, 503, 0.0) + model.cost(250, 128, 0.0) + 1e-9;
+    let frame = Elider::new(Algorithm::Optimize, budget).choose(&cands, &model, None);
+    assert_eq!(lods_of(&frame), vec![Some(1), Some(0)]);
+}
+
+#[test]
+fn a_texture_makes_fill_bound_objects_cost_more() {
+    let model = CostModel::default();
+    let plain = vec![Candidate::new(0, chain(100, 1), 200_000.0)];
+    let textured = vec![Candidate::new(
+        0,
+        vec![LodOption {
+            texels: Some(4096.0),
+            ..chain(100, 1)[0]
+        }],
+        200_000.0,
+    )];
+    let predicted = |c: &[Candidate]| {
+        Elider::new(Algorithm::None, 1.0)
+            .choose(c, &model, None)
+            .predicted_s
+    };
+    assert_eq!(predicted(&plain), model.c3 * 200_000.0);
+    assert_eq!(predicted(&textured), (model.c3 + model.c4) * 200_000.0);
 }
 
 #[test]
@@ -332,7 +399,7 @@ fn brute_force(cands: &[Candidate], model: &CostModel, budget: f64) -> f64 {
             for l in c.lods.iter().filter(|l| l.resident) {
                 o.push((
                     lod_cost(model, l, c.pixels),
-                    w * accuracy(&params, l.triangles, c.pixels),
+                    w * lod_accuracy(&params, l, c.pixels),
                 ));
             }
             o
@@ -392,6 +459,7 @@ fn hysteresis_keeps_choices_through_small_changes() {
     // Geometry-bound costs, so that LOD 0 costs more than LOD 1.
     let model = CostModel {
         c3: 0.0,
+        c4: 0.0,
         ..CostModel::default()
     };
     let budget = model.cost(400, 203, 0.0) + model.cost(100, 53, 0.0) + 1e-7;
