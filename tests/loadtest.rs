@@ -3,6 +3,7 @@
 
 use portico_client::policy::{parse_policy, policy_spec};
 use portico_data::path::{CameraPath, PathKind, generate};
+use portico_lab::drawn::DrawnLog;
 use portico_lab::loadtest::{Link, LinkError, LoadtestConfig, LoadtestSummary, run};
 use portico_protocol::Policy;
 use std::path::{Path, PathBuf};
@@ -135,6 +136,21 @@ fn a_loadtest_measures_the_policy_and_both_baselines_and_writes_its_report() {
     }
     let csv = std::fs::read_to_string(out.join("frames.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1 + 3 * 40);
+
+    // Client 0's drawn frames, one log per run, for `portico bench --replay`.
+    for (file, run) in [
+        ("depth_16_gran_object_range_any_look_any", names(&s)[0]),
+        ("demand", "demand"),
+        ("oracle", "oracle"),
+    ] {
+        let log = DrawnLog::read(&out.join("drawn").join(format!("{file}.json"))).unwrap();
+        assert_eq!(log.run, run);
+        assert_eq!(log.database_id, s.database_id);
+        assert_eq!(log.dt_s, 0.02);
+        let frames: Vec<usize> = log.frames.iter().map(|f| f.path_frame).collect();
+        assert_eq!(frames, (0..40).collect::<Vec<_>>(), "{run}");
+        assert!(log.frames.iter().any(|f| !f.objects.is_empty()), "{run}");
+    }
 }
 
 #[test]

@@ -1,14 +1,22 @@
 //! Textures end to end: the tiny building with the generator's textured materials, served by a
 //! real server and walked by the real client (wgpu on llvmpipe), against the same building
-//! without textures on the same tour.
+//! without textures on the same tour; streamed textured frames replayed and scored by the
+//! benchmark.
 
+use portico_client::cost::CostModel;
 use portico_client::elision::Algorithm;
+use portico_client::frame::{Decider, Resident, Scene};
+use portico_client::view;
 use portico_data::build::{BuildOptions, Quiet, build};
+use portico_data::cells::StabList;
 use portico_data::import::import_file;
 use portico_data::path::{PathKind, generate};
+use portico_lab::bench::BenchConfig;
+use portico_lab::drawn::{DrawnFrame, DrawnLog};
 use portico_native::walk::{WalkConfig, WalkSummary, walk};
 use portico_protocol::Policy;
 use std::path::Path;
+use std::sync::Arc;
 
 mod common;
 
@@ -126,4 +134,108 @@ fn a_textured_walk_streams_and_draws_its_textures_within_the_budget() {
     };
     let (dp, dt) = (d("plain"), d("textured"));
     assert!(dt > 2.0 * dp, "detail textured {dt:.2} vs plain {dp:.2}");
+}
+
+/// What a client with everything resident draws on each of the bench's frames, as a load test
+/// records it; `strip` draws every textured object in its average colour instead.
+fn drawn_everything(cfg: &BenchConfig, strip: bool) -> DrawnLog {
+    struct All(Vec<Option<Arc<StabList>>>);
+    impl Resident for All {
+        fn has(&self, _: u32) -> bool {
+            true
+        }
+        fn stab(&self, cell: u32) -> Option<Arc<StabList>> {
+            self.0.get(cell as usize).cloned().flatten()
+        }
+    }
+    let db = portico_data::Database::open(&cfg.db).unwrap();
+    let header = db.header().clone();
+    let graph = db.cell_graph().unwrap().unwrap();
+    let all = All((0..graph.cells.len() as u32)
+        .map(|c| {
+            let live = graph.cells[c as usize].live;
+            live.then(|| Arc::new(db.stab_list(c).unwrap()))
+        })
+        .collect());
+    let bounds: Vec<_> = header.instances.iter().map(|i| i.bounds).collect();
+    let scene = Scene {
+        header: &header,
+        graph: Some(&graph),
+        bounds: &bounds,
+    };
+    let mut decider = Decider::new(Algorithm::None, cfg.budget_s, None);
+    let far = view::far_plane(&header.bounds);
+    let frames = (0..cfg.frame_count())
+        .map(|f| {
+            let (eye, dir) = cfg.path.sample((f as f64 * cfg.dt_s) as f32);
+            let v = view::Viewpoint::new(eye, dir, cfg.fovy, cfg.size, far);
+            let d = decider.decide(&scene, &v, &all, &CostModel::default(), None);
+            let mut frame = DrawnFrame::of(&d, f as usize);
+            if strip {
+                for o in &mut frame.objects {
+                    let inst = &header.instances[o.instance as usize];
+                    if let (Some(_), Some(t)) = (o.texture.take(), header.texture_of(inst)) {
+                        o.tint = t.average;
+                    }
+                }
+            }
+            frame
+        })
+        .collect();
+    let p = db.prologue();
+    DrawnLog {
+        run: if strip { "average" } else { "everything" }.into(),
+        database_id: format!("{:016x}{:016x}", p.header_checksum, p.index_checksum),
+        path_hash: format!("{:016x}", cfg.path.hash()),
+        dt_s: cfg.dt_s,
+        frames,
+    }
+}
+
+#[test]
+fn streamed_frames_are_scored_by_drawing_them_again_beside_the_full_detail_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let db = build_tiny(dir.path(), true);
+    let graph = portico_data::Database::open(&db)
+        .unwrap()
+        .cell_graph()
+        .unwrap()
+        .unwrap();
+    let path = generate(&graph, PathKind::Tour, 2, 1, 1.5, 1.5).unwrap();
+    let mut cfg = BenchConfig::new(db, path, 0.05, dir.path().join("bench"));
+    cfg.size = (96, 72);
+    cfg.max_frames = Some(8);
+    cfg.dt_s = 0.25;
+    cfg.algorithms = Vec::new();
+    let everything = dir.path().join("everything.json");
+    drawn_everything(&cfg, false).write(&everything).unwrap();
+    let average = dir.path().join("average.json");
+    drawn_everything(&cfg, true).write(&average).unwrap();
+    cfg.replays = vec![everything.clone(), average];
+    let s = portico_lab::bench::run(&cfg, &mut |_, _| {}).unwrap();
+
+    let names: Vec<&str> = s.runs.iter().map(|r| r.name.as_str()).collect();
+    assert_eq!(
+        names,
+        ["regular", "streamed everything", "streamed average"]
+    );
+    // What a client with everything drew is the full-detail frame, texel for texel ...
+    assert_eq!(s.runs[1].psnr_mean, None, "{:?}", s.runs[1]);
+    assert_eq!(s.runs[1].identical_frames, 8);
+    // ... and the same objects in their textures' average colours are not.
+    let psnr = s.runs[2].psnr_mean.expect("average colours differ");
+    assert!(psnr.is_finite() && psnr < 40.0, "{psnr}");
+
+    // A log from another database, or at another frame step, is refused naming the file.
+    let mut log = drawn_everything(&cfg, false);
+    log.database_id = "0".repeat(32);
+    let other = dir.path().join("other.json");
+    log.write(&other).unwrap();
+    cfg.replays = vec![other];
+    let e = portico_lab::bench::run(&cfg, &mut |_, _| {}).unwrap_err();
+    assert!(format!("{e:#}").contains("other.json"), "{e:#}");
+    cfg.replays = vec![everything];
+    cfg.dt_s = 0.2;
+    let e = portico_lab::bench::run(&cfg, &mut |_, _| {}).unwrap_err();
+    assert!(format!("{e:#}").contains("frame step"), "{e:#}");
 }

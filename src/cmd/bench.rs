@@ -1,6 +1,6 @@
 //! `portico bench --db FILE.portico (--path FILE | --path-kind tour [--legs L --seed S])
 //! --budget-ms B [--size 640x480] [--max-frames F] [--algorithms regular,none,static,feedback,optimize,impostors,coarsest]
-//! -o DIR`: frame rate and image fidelity of the detail elision algorithms
+//! [--replay LOADTEST/drawn/RUN.json ...] -o DIR`: frame rate and image fidelity of the detail elision algorithms
 //! (Funkhouser Table 4.3 / Fig. 4.22, RRB §5.2-5.3). The work is `portico_lab::bench`.
 
 use crate::cmd::values;
@@ -32,6 +32,11 @@ pub struct Args {
     #[arg(long, default_value = "regular,none,static,feedback,optimize", value_delimiter = ',',
           value_parser = values::bench_run())]
     algorithms: Vec<String>,
+    /// A load test's drawn-frames log (its `drawn/<run>.json`) to draw and score as a run of
+    /// its own: the PSNR of what a streamed client drew. Repeatable; the load test's
+    /// --budget-ms must equal --frame-step-ms.
+    #[arg(long, value_name = "FILE")]
+    replay: Vec<PathBuf>,
     /// Path time between frames, milliseconds (frame i shows the path at i x this).
     #[arg(long, default_value_t = 50.0)]
     frame_step_ms: f64,
@@ -64,6 +69,7 @@ pub fn run(a: Args) -> Result<()> {
     cfg.algorithms = RunKind::parse_list(&a.algorithms.join(","))?;
     cfg.dt_s = a.frame_step_ms / 1e3;
     cfg.patch_px = a.patch_px;
+    cfg.replays = a.replay.clone();
     cfg.fovy = a.fov.clamp(10.0, 150.0).to_radians();
     let bars = Bars::new();
     let mut started = false;

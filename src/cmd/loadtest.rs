@@ -316,6 +316,10 @@ pub fn print_summary(s: &LoadtestSummary, out: &std::path::Path) {
         println!("  {v}");
     }
     println!("  report: {}", out.join("report.md").display());
+    println!(
+        "  client 0's drawn frames: {} (score them: portico bench --replay)",
+        out.join("drawn").display()
+    );
 }
 
 /// `--stress N,… --stream`: the push transport per level of concurrency, measured from the

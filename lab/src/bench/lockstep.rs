@@ -11,6 +11,7 @@ use super::{
     BenchConfig, BenchSummary, CriticalSummary, FrameRecord, ModelInfo, Parameters, PathInfo,
     RunKind, RunSummary,
 };
+use crate::drawn::DrawnLog;
 use anyhow::{Context, Result, bail};
 use glam::Mat4;
 use image::RgbaImage;
@@ -34,6 +35,8 @@ struct FrameView {
 /// One run's state across frames.
 struct Run {
     kind: RunKind,
+    /// The name in reports: the kind's, or `streamed <run>` for a replay.
+    name: String,
     decider: Decider,
     online: OnlineCost,
     last_frame_s: Option<f64>,
@@ -50,6 +53,8 @@ impl RunKind {
             RunKind::Coarsest => Algorithm::Coarsest,
             RunKind::Impostors => Algorithm::Impostors,
             RunKind::Elision(a) => a,
+            // Replays decide nothing: they draw what the log says.
+            RunKind::Replay(_) => Algorithm::None,
         }
     }
 
@@ -80,15 +85,28 @@ pub(super) struct Bench<'a> {
     cost: CostModel,
     runs: Vec<Run>,
     depth: DepthBuffer,
+    /// The replayed runs' logs, by [`RunKind::Replay`] index.
+    logs: Vec<DrawnLog>,
 }
 
 impl<'a> Bench<'a> {
-    pub(super) fn new(cfg: &'a BenchConfig, scene: &'a Scene, cost: CostModel) -> Self {
+    pub(super) fn new(
+        cfg: &'a BenchConfig,
+        scene: &'a Scene,
+        cost: CostModel,
+        logs: Vec<DrawnLog>,
+    ) -> Self {
         let runs = cfg
             .runs()
             .into_iter()
             .map(|kind| Run {
                 kind,
+                name: match kind {
+                    RunKind::Replay(i) => logs
+                        .get(usize::from(i))
+                        .map_or("streamed".to_owned(), |l| format!("streamed {}", l.run)),
+                    _ => kind.name().to_owned(),
+                },
                 decider: Decider::new(kind.algorithm(), cfg.budget_s, None),
                 online: OnlineCost::default(),
                 last_frame_s: None,
@@ -102,6 +120,7 @@ impl<'a> Bench<'a> {
             cost,
             runs,
             depth: DepthBuffer::new(cfg.size.0, cfg.size.1, NEAR),
+            logs,
         }
     }
 
@@ -169,6 +188,9 @@ impl<'a> Bench<'a> {
         k: usize,
         v: &FrameView,
     ) -> Result<(FrameRecord, Vec<(u32, usize)>)> {
+        if let RunKind::Replay(i) = self.runs[k].kind {
+            return self.replay(r, usize::from(i), v);
+        }
         let t0 = Instant::now();
         let run = &mut self.runs[k];
         let cost = run.online.apply(&self.cost);
@@ -203,6 +225,63 @@ impl<'a> Bench<'a> {
             triangles: timing.triangles,
             ..FrameRecord::default()
         };
+        Ok((row, drawn))
+    }
+
+    /// Draws frame `v` as replay `i`'s log drew it: each object at its LOD with the texture
+    /// segment and tint it had, and its boxes.
+    fn replay(
+        &mut self,
+        r: &mut Renderer,
+        i: usize,
+        v: &FrameView,
+    ) -> Result<(FrameRecord, Vec<(u32, usize)>)> {
+        let scene = self.scene;
+        let t0 = Instant::now();
+        let frame = self.logs.get(i).and_then(|l| l.at(v.frame));
+        let Some(frame) = frame else {
+            bail!("replay {i} has no frame {}", v.frame);
+        };
+        let mut draws: Vec<Draw<'a>> = frame
+            .objects
+            .iter()
+            .filter_map(|o| {
+                let mesh = scene
+                    .meshes
+                    .get(&scene.segment(o.instance, o.lod as usize)?)?;
+                let (_, _, alpha) = scene.material(o.instance, o.lod as usize);
+                Some(Draw {
+                    mesh,
+                    transform: scene.transforms[o.instance as usize],
+                    color: o.tint,
+                    texture: o.texture.and_then(|s| scene.textures.get(&s)),
+                    alpha,
+                })
+            })
+            .collect();
+        let boxes: Vec<(u32, Stand)> = frame
+            .boxes
+            .iter()
+            .map(|&(n, t)| (n, if t { Stand::Textured } else { Stand::Colour }))
+            .collect();
+        let textured = self.boxes(&boxes, &mut draws);
+        let timing = r.render_with_boxes(&v.view.camera, &draws, &textured)?;
+        let row = FrameRecord {
+            frame: v.frame,
+            t: v.t,
+            frame_s: t0.elapsed().as_secs_f64(),
+            render_s: timing.total_s,
+            visible_objects: frame.visible,
+            drawn_objects: timing.draws,
+            triangles: timing.triangles,
+            ..FrameRecord::default()
+        };
+        let mut drawn: Vec<(u32, usize)> = frame
+            .objects
+            .iter()
+            .map(|o| (o.instance, o.lod as usize))
+            .collect();
+        drawn.sort_unstable();
         Ok((row, drawn))
     }
 
@@ -294,7 +373,7 @@ impl<'a> Bench<'a> {
     pub(super) fn runs_rows(&self) -> Vec<(String, &[FrameRecord])> {
         self.runs
             .iter()
-            .map(|r| (r.kind.name().to_owned(), r.rows.as_slice()))
+            .map(|r| (r.name.clone(), r.rows.as_slice()))
             .collect()
     }
 
@@ -349,7 +428,7 @@ impl<'a> Bench<'a> {
                 visibility_test: "CPU depth buffer of the Regular frame (farthest of 3x3 nearest \
                                   surfaces, +1% +1 cm)"
                     .to_owned(),
-                runs: cfg.runs().iter().map(|k| k.name().to_owned()).collect(),
+                runs: self.runs.iter().map(|r| r.name.clone()).collect(),
             },
             critical: CriticalSummary {
                 counts,
@@ -384,7 +463,7 @@ fn summarise_run(run: &Run, budget_s: f64, regular_polys: f64, total_critical: u
     let psnrs: Vec<f64> = rows.iter().filter_map(|x| x.psnr).collect();
     let polygons = series_of(rows, |x| x.triangles as f64);
     RunSummary {
-        name: run.kind.name().to_owned(),
+        name: run.name.clone(),
         budget: budget_s,
         budgeted: run.kind.budgeted(),
         frames: rows.len() as u64,

@@ -17,7 +17,10 @@
 //! * `none`, `static`, `feedback`, `optimize`: [`portico_client::elision::Elider`] with the frame
 //!   budget, fed the measured frame times and the online-corrected, start-up-calibrated cost model
 //!   exactly as the walk client does (`portico_native::walk`);
-//! * `coarsest` (optional): the coarsest LOD of everything, a lower bound on fidelity.
+//! * `coarsest` (optional): the coarsest LOD of everything, a lower bound on fidelity;
+//! * replays (`--replay drawn/<run>.json`, [`crate::drawn`]): the frames a load test's client
+//!   drew with what its cache and link let it have, each LOD, texture level and box as it drew
+//!   them, so the PSNR is that of streamed frames.
 //!
 //! The runs advance in **lockstep**: for each frame the Regular frame is drawn first, then every
 //! other run draws the same frame, so all runs see the same machine state and a frame's
@@ -64,6 +67,7 @@ pub use summary::{
     RunSummary, SelfTest,
 };
 
+use crate::drawn::DrawnLog;
 use anyhow::{Context, Result, bail, ensure};
 use critical::CriticalParams;
 use lockstep::Bench;
@@ -88,6 +92,9 @@ pub enum RunKind {
     /// Maciel's cluster traversal with the frame budget: far clusters as textured or
     /// average-colour boxes, the rest as objects ([`portico_client::cluster`]).
     Impostors,
+    /// The frames a load test's client drew, replayed from [`BenchConfig::replays`]`[i]`
+    /// ([`crate::drawn`]): what it had resident, not everything.
+    Replay(u16),
 }
 
 impl RunKind {
@@ -107,6 +114,7 @@ impl RunKind {
             RunKind::Elision(a) => a.name(),
             RunKind::Coarsest => "coarsest",
             RunKind::Impostors => "impostors",
+            RunKind::Replay(_) => "replay",
         }
     }
 
@@ -174,6 +182,9 @@ pub struct BenchConfig {
     pub patch_px: u32,
     /// Critical-vertex selection.
     pub critical: CriticalParams,
+    /// Drawn-frames logs of load test runs ([`crate::drawn::DrawnLog`]) to draw and score as
+    /// runs of their own, after the others.
+    pub replays: Vec<PathBuf>,
 }
 
 impl BenchConfig {
@@ -192,6 +203,7 @@ impl BenchConfig {
             fovy: 60f32.to_radians(),
             patch_px: fidelity::DEFAULT_PATCH,
             critical: CriticalParams::default(),
+            replays: Vec::new(),
         }
     }
 
@@ -236,14 +248,16 @@ impl BenchConfig {
         n.min(self.max_frames.unwrap_or(u64::MAX))
     }
 
-    /// The runs in order, Regular first and no run twice.
+    /// The runs in order, Regular first and no run twice, then the replays.
     pub fn runs(&self) -> Vec<RunKind> {
         let mut out = vec![RunKind::Regular];
         for k in &self.algorithms {
-            if !out.contains(k) {
+            if !out.contains(k) && !matches!(k, RunKind::Replay(_)) {
                 out.push(*k);
             }
         }
+        let replays = u16::try_from(self.replays.len()).unwrap_or(u16::MAX);
+        out.extend((0..replays).map(RunKind::Replay));
         out
     }
 }
@@ -256,9 +270,15 @@ pub fn run(cfg: &BenchConfig, progress: &mut dyn FnMut(u64, u64)) -> Result<Benc
     std::fs::create_dir_all(&cfg.out).with_context(|| format!("creating {}", cfg.out.display()))?;
     let mut renderer = Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
     let scene = Scene::load(&cfg.db, &renderer, &cfg.critical)?;
-    // Funkhouser §4.2.3: C1, C2, C3 from timed sample draws at start-up, as the walk client.
+    let mut logs = Vec::with_capacity(cfg.replays.len());
+    for path in &cfg.replays {
+        let log = DrawnLog::read(path)?;
+        log.check(path, &scene.database_id, cfg.dt_s, cfg.frame_count())?;
+        logs.push(log);
+    }
+    // Funkhouser §4.2.3: C1..C4 from timed sample draws at start-up, as the walk client.
     let cost = portico_render::calibrate(&mut renderer)?;
-    let mut bench = Bench::new(cfg, &scene, cost);
+    let mut bench = Bench::new(cfg, &scene, cost, logs);
     bench.run(&mut renderer, progress)?;
     let mut summary = bench.summarise(&renderer, start.elapsed().as_secs_f64());
     summary.files = report::FILES.iter().map(|f| (*f).to_owned()).collect();

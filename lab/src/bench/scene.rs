@@ -59,8 +59,9 @@ pub struct Scene {
     pub colour_boxes: Vec<GpuMesh>,
     /// Each cluster's textured box, where it has one.
     pub textured: HashMap<u32, GpuImpostor>,
-    /// Each material texture at full resolution, by its finest segment (which holds the whole
-    /// chain).
+    /// Every segment of every material texture, by segment (each holds a whole chain from its
+    /// level down): the finest draws the full-detail frames, the coarser ones replayed
+    /// streamed frames.
     pub textures: HashMap<u32, GpuTexture>,
 }
 
@@ -140,18 +141,20 @@ impl Scene {
         Ok(())
     }
 
-    /// Uploads every material texture's finest segment (every level of its chain).
+    /// Uploads every segment of every material texture. `gpu_bytes` counts the finest
+    /// (what the full-detail frames need).
     fn load_textures(&mut self, db: &Database, renderer: &Renderer) -> Result<()> {
         for (i, t) in self.header.textures.iter().enumerate() {
-            let Some(finest) = t.segments.last() else {
-                continue;
-            };
-            let bytes = db.segment(finest.segment)?;
-            let gpu = renderer
-                .upload_texture(&bytes, t.wrap)
-                .with_context(|| format!("texture {i} ({})", t.name))?;
-            self.gpu_bytes += gpu.gpu_bytes();
-            self.textures.insert(finest.segment, gpu);
+            for (k, s) in t.segments.iter().enumerate() {
+                let bytes = db.segment(s.segment)?;
+                let gpu = renderer
+                    .upload_texture(&bytes, t.wrap)
+                    .with_context(|| format!("texture {i} ({})", t.name))?;
+                if k + 1 == t.segments.len() {
+                    self.gpu_bytes += gpu.gpu_bytes();
+                }
+                self.textures.insert(s.segment, gpu);
+            }
         }
         Ok(())
     }

@@ -391,6 +391,11 @@ fn plots(r: &mut String, s: &LoadtestSummary) {
         r,
         "## Plots (client 0; Funkhouser Fig. 5.11–5.13)\n\n![LODs skipped per frame](lods_skipped.png)\n\n![Lookahead MB per frame](lookahead_mb.png)\n"
     );
+    let _ = writeln!(
+        r,
+        "Client 0's frames as drawn, one log per run, are in `drawn/`: `portico bench --db <the same database> --path <the same path> --frame-step-ms {:.0} --replay drawn/<run>.json -o DIR` draws them beside the full-detail frames and scores them (PSNR, Es, Et).\n",
+        s.budget_s * 1e3
+    );
 }
 
 fn method(r: &mut String, s: &LoadtestSummary) {

@@ -6,6 +6,7 @@ use super::sim::{ClientResult, Mode};
 use super::world::{Plan, World};
 use super::{LoadtestConfig, LoadtestSummary, Machine, ORACLE_LOOKAHEAD_FRAMES};
 use super::{cpu, link, sim, world};
+use crate::drawn::DrawnLog;
 use anyhow::{Context, Result};
 use portico_native::net::Remote;
 use std::sync::Arc;
@@ -37,10 +38,11 @@ pub(super) async fn run_all(
         let base = i as u64 * cfg.clients as u64 * plan.frames;
         let before = probe.sample().await;
         let t = Instant::now();
-        let clients = run_clients(cfg, &world, &remote, mode, &mut |d| {
+        let mut clients = run_clients(cfg, &world, &remote, mode, &mut |d| {
             progress(base + d, total)
         })
         .await?;
+        write_drawn(cfg, &world, &name, &mut clients)?;
         let wall_s = t.elapsed().as_secs_f64();
         let usage = probe.usage(before, probe.sample().await);
         results.push(aggregate(name, mode, cfg, clients, wall_s, usage));
@@ -75,6 +77,39 @@ pub(super) async fn run_all(
     })
 }
 
+/// Writes client 0's drawn frames to `<out>/drawn/<run>.json` ([`DrawnLog`]), for the
+/// benchmark to score against the full-detail frames (`portico bench --replay`).
+fn write_drawn(
+    cfg: &LoadtestConfig,
+    world: &World,
+    run: &str,
+    clients: &mut [ClientResult],
+) -> Result<()> {
+    let Some(first) = clients.first_mut() else {
+        return Ok(());
+    };
+    let dir = cfg.out.join("drawn");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let log = DrawnLog {
+        run: run.to_owned(),
+        database_id: world.database_id.clone(),
+        path_hash: format!("{:016x}", cfg.path.hash()),
+        dt_s: cfg.budget_s,
+        frames: std::mem::take(&mut first.drawn),
+    };
+    let file: String = run
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    log.write(&dir.join(format!("{file}.json")))
+}
+
 /// The "0 frames" curve along client 0's frames (client 0 starts at path frame 0).
 fn visible_mb(world: &World, frames: u64) -> Vec<f64> {
     if world.truth.is_empty() {
@@ -101,7 +136,7 @@ async fn run_clients(
     let done = Arc::new(AtomicU64::new(0));
     let offsets = world::offsets(cfg.clients, world.path_frames());
     let mut handles = Vec::with_capacity(cfg.clients);
-    for offset in offsets {
+    for (i, offset) in offsets.into_iter().enumerate() {
         let setup = sim::Setup {
             world: world.clone(),
             // A connection pool of its own per client, as separate machines would have.
@@ -112,6 +147,8 @@ async fn run_clients(
             frames: cfg.frames(),
             cache_bytes: cfg.cache_bytes,
             done: done.clone(),
+            // Client 0 starts at path frame 0: its frames are the benchmark's frames.
+            record: i == 0,
         };
         handles.push(tokio::spawn(sim::client(setup)));
     }

@@ -16,6 +16,7 @@
 
 use super::link::Pipe;
 use super::world::World;
+use crate::drawn::DrawnFrame;
 use portico_client::cache::ObjectCache;
 use portico_client::cost::CostModel;
 use portico_client::elision::{Algorithm, Candidate, Choice};
@@ -114,6 +115,8 @@ pub struct ClientResult {
     /// The first frame in which every visible object was represented (its own LOD, or with
     /// impostors a box above it), and the bytes that had arrived by then.
     pub first_complete: Option<(u64, u64)>,
+    /// What each frame drew, when [`Setup::record`] asked for it.
+    pub drawn: Vec<DrawnFrame>,
 }
 
 /// What the IO task hands the frame loop: segment bodies are just their sizes.
@@ -138,6 +141,8 @@ pub struct Setup {
     pub cache_bytes: u64,
     /// Frames played by all clients so far (progress).
     pub done: Arc<AtomicU64>,
+    /// Record what each frame drew ([`ClientResult::drawn`]).
+    pub record: bool,
 }
 
 /// Plays one client's frames in real time (one frame per `world.dt`) and returns its figures.
@@ -194,6 +199,7 @@ struct Client {
     consumed: u64,
     last_answer: Option<AnswerStat>,
     result: ClientResult,
+    record: bool,
 }
 
 impl Client {
@@ -219,6 +225,7 @@ impl Client {
             consumed: 0,
             last_answer: None,
             result: ClientResult::default(),
+            record: s.record,
         }
     }
 
@@ -300,6 +307,9 @@ impl Client {
         };
         for (c, ch) in d.candidates.iter().zip(&d.frame.choices) {
             count(&mut row, c, ch);
+        }
+        if self.record {
+            self.result.drawn.push(DrawnFrame::of(&d, p));
         }
         // What was drawn (the eye's stab list too, when it was used) counts as used.
         let mut used: Vec<u32> = d.drawn.iter().map(|o| o.segment).collect();
@@ -566,12 +576,7 @@ mod tests {
 
     #[test]
     fn a_skipped_object_counts_every_level_it_lacks() {
-        let lod = |resident| LodOption {
-            triangles: 10,
-            vertices: 10,
-            error: 0.0,
-            resident,
-        };
+        let lod = |resident| LodOption::new(10, 10, 0.0, resident);
         let c = Candidate::new(0, vec![lod(false), lod(false), lod(true)], 100.0);
         let mut row = FrameStat::default();
         // Wanted LOD 0, drew LOD 2: two levels skipped.
