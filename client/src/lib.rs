@@ -10,7 +10,8 @@
 //! - [`cluster`]: Maciel's best-first traversal of the model hierarchy (§6.4).
 //! - [`cost`]: the cost model (§4.2.3) and its online correction.
 //! - [`cache`]: the LRU object cache under a hard byte budget (§5.2.3).
-//! - [`schedule`]: the read schedule of the IO stage (§5.2.3, Ch. 6).
+//! - [`schedule`]: the read schedule of the IO stage (§5.2.3, Ch. 6); [`pacing`]: what it
+//!   keeps in flight on the measured link.
 //! - [`navigate`]: Funkhouser's mouse-and-keyboard navigation (§3.3.1).
 //! - [`policy`], [`stats`]: prefetch policy specs, per-frame statistics.
 
@@ -20,6 +21,7 @@ pub mod cost;
 pub mod elision;
 pub mod frame;
 pub mod navigate;
+pub mod pacing;
 pub mod policy;
 pub mod schedule;
 pub mod stats;

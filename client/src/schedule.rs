@@ -41,6 +41,11 @@ pub struct Schedule {
     /// Bytes of each segment in flight or delivered and not yet taken, and their sum.
     outstanding: HashMap<u32, u64>,
     outstanding_bytes: u64,
+    /// Most wire bytes in flight ([`Schedule::set_wire_cap`]; `None`: no limit).
+    wire_cap: Option<u64>,
+    /// Wire bytes of each segment in flight, and their sum.
+    wire: HashMap<u32, u64>,
+    wire_bytes: u64,
 }
 
 impl Schedule {
@@ -57,6 +62,19 @@ impl Schedule {
     /// Bytes in flight or delivered and not yet taken.
     pub fn outstanding_bytes(&self) -> u64 {
         self.outstanding_bytes
+    }
+
+    /// Keeps at most `cap` bytes on the wire in flight from now on (one segment alone may
+    /// exceed it): [`crate::pacing::LinkMeter::cap`], so that what a new need list makes
+    /// urgent does not queue behind more read-ahead than the link delivers within its horizon.
+    /// `None` lifts the limit.
+    pub fn set_wire_cap(&mut self, cap: Option<u64>) {
+        self.wire_cap = cap;
+    }
+
+    /// Wire bytes in flight.
+    pub fn wire_bytes(&self) -> u64 {
+        self.wire_bytes
     }
 
     fn settle(&mut self, id: u32) {
@@ -154,6 +172,9 @@ impl Schedule {
     /// was first listed.
     pub fn finished(&mut self, id: u32, outcome: Result<u64, ()>, now: Instant) -> Instant {
         self.inflight.remove(&id);
+        if let Some(b) = self.wire.remove(&id) {
+            self.wire_bytes -= b;
+        }
         match outcome {
             Ok(seq) => {
                 self.failed.remove(&id);
@@ -168,8 +189,8 @@ impl Schedule {
     }
 
     /// The next read request: the most urgent wanted segments, up to [`BATCH_ITEMS`] and
-    /// [`BATCH_BYTES`] (at least one) and within the window (a segment alone when nothing is
-    /// outstanding); `bytes` gives a segment's size.
+    /// [`BATCH_BYTES`] (at least one) and within the window and the wire cap (a segment alone
+    /// when nothing is outstanding, or nothing is on the wire); `bytes` gives a segment's size.
     pub fn next_batch(&mut self, now: Instant, bytes: impl Fn(u32) -> u64) -> Vec<u32> {
         self.next_batch_sized(now, &bytes, &bytes)
     }
@@ -198,6 +219,13 @@ impl Schedule {
             {
                 break;
             }
+            let first_on_wire = ids.is_empty() && self.wire_bytes == 0;
+            if self
+                .wire_cap
+                .is_some_and(|c| self.wire_bytes + total + b > c && !first_on_wire)
+            {
+                break;
+            }
             self.take(id);
             total += b;
             total_held += h;
@@ -207,6 +235,9 @@ impl Schedule {
             let b = held(id);
             self.outstanding.insert(id, b);
             self.outstanding_bytes += b;
+            let w = wire(id);
+            self.wire.insert(id, w);
+            self.wire_bytes += w;
         }
         ids
     }
@@ -312,6 +343,30 @@ mod tests {
         v.refresh(ids, t0);
         let n = v.next_batch_sized(t0, &|_| 1 << 10, &|_| 100 << 10).len();
         assert_eq!(n, BATCH_ITEMS.min(10));
+    }
+
+    #[test]
+    fn the_wire_cap_bounds_what_is_in_flight_on_the_link() {
+        let t0 = Instant::now();
+        let size = |id: u32| u64::from(id) * 10;
+        let mut s = Schedule::default();
+        s.set_wire_cap(Some(100));
+        s.refresh(vec![3, 4, 5, 9, 2], t0);
+        assert_eq!(s.next_batch(t0, size), vec![3, 4]);
+        assert_eq!(s.wire_bytes(), 70);
+        assert!(s.next_batch(t0, size).is_empty(), "50 more would pass 100");
+        // Delivered is off the wire, though not yet taken (the window's business).
+        s.finished(3, Ok(1), t0);
+        assert_eq!(s.wire_bytes(), 40);
+        assert_eq!(s.next_batch(t0, size), vec![5]);
+        s.finished(4, Err(()), t0);
+        s.finished(5, Ok(2), t0);
+        assert_eq!(s.wire_bytes(), 0);
+        // Nothing on the wire: a segment larger than the cap goes alone.
+        assert_eq!(s.next_batch(t0, |_| 500), vec![9]);
+        assert!(s.next_batch(t0, size).is_empty());
+        s.set_wire_cap(None);
+        assert_eq!(s.next_batch(t0, size), vec![2]);
     }
 
     #[test]

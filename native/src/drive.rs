@@ -7,6 +7,7 @@
 //!   a newer state waits for the answer in flight), and the answer's items become the list;
 //! - from the client itself ([`Ask::wants`]): demand fetch and the oracle of the load tester.
 
+use portico_client::pacing::LinkMeter;
 use portico_client::schedule::Schedule;
 use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
 use std::collections::{HashMap, HashSet};
@@ -82,7 +83,9 @@ pub trait Fetcher: Clone + Send + Sync + 'static {
 
 /// Runs the IO stage until the frame loop goes away: keeps up to `parallel` segment fetches
 /// busy from the latest need list, with at most `window` bytes in flight or delivered and not
-/// yet taken ([`Schedule::with_window`]), and sends what happens on `tx`.
+/// yet taken ([`Schedule::with_window`]) and at most what the measured link delivers within
+/// two frames past its round trip on the wire ([`LinkMeter::cap`]), and sends what happens on
+/// `tx`.
 pub async fn drive<F: Fetcher>(
     fetcher: F,
     policy: Policy,
@@ -92,10 +95,15 @@ pub async fn drive<F: Fetcher>(
     tx: mpsc::Sender<Event<F::Body>>,
 ) {
     let mut s = Schedule::with_window(window);
+    // What arrives within two frames past the round trip stays in flight, no more: a new
+    // list's urgent segments never queue behind more read-ahead than that ([`LinkMeter`]).
+    let mut meter = LinkMeter::default();
+    let horizon_s = 2.0 * f64::from(policy.frame_time_s);
     let mut seq = 0u64;
     let mut fetches: JoinSet<Fetched<F::Body>> = JoinSet::new();
-    // What each read request in flight asked for (a task that panics must not strand them).
-    let mut batches: HashMap<tokio::task::Id, Vec<u32>> = HashMap::new();
+    // What each read request in flight asked for (a task that panics must not strand them),
+    // and when it was sent.
+    let mut batches: HashMap<tokio::task::Id, (Vec<u32>, Instant)> = HashMap::new();
     let mut asking: Option<JoinHandle<Answered>> = None;
     // A frame state the server has not yet been asked about.
     let mut unasked: Option<Ask> = None;
@@ -105,10 +113,11 @@ pub async fn drive<F: Fetcher>(
         {
             asking = Some(ask_server(&fetcher, &mut s, policy, ask));
         }
+        s.set_wire_cap(Some(meter.cap(horizon_s)));
         while fetches.len() < parallel.max(1) {
-            let ids = s.next_batch_sized(Instant::now(), &|id| fetcher.bytes(id), &|id| {
-                fetcher.held_bytes(id)
-            });
+            let now = Instant::now();
+            let ids =
+                s.next_batch_sized(now, &|id| fetcher.bytes(id), &|id| fetcher.held_bytes(id));
             if ids.is_empty() {
                 break;
             }
@@ -118,7 +127,8 @@ pub async fn drive<F: Fetcher>(
                 let got = f.batch(ids.clone()).await;
                 (ids, got)
             });
-            batches.insert(task.id(), asked);
+            meter.started(now);
+            batches.insert(task.id(), (asked, now));
         }
         let event = tokio::select! {
             changed = state.changed() => {
@@ -150,17 +160,22 @@ pub async fn drive<F: Fetcher>(
                 }
             }
             Some(done) = fetches.join_next_with_id(), if !fetches.is_empty() => {
-                let (ids, got) = match done {
+                let now = Instant::now();
+                let (ids, got, sent) = match done {
                     Ok((task, (ids, got))) => {
-                        batches.remove(&task);
-                        (ids, got)
+                        let sent = batches.remove(&task).map_or(now, |b| b.1);
+                        (ids, got, sent)
                     }
                     // The task panicked (a decoder or the GPU upload): its segments failed.
                     Err(e) => {
-                        let ids = batches.remove(&e.id()).unwrap_or_default();
-                        (ids, Err(anyhow::anyhow!("read task: {e}")))
+                        let (ids, sent) = batches.remove(&e.id()).unwrap_or((Vec::new(), now));
+                        (ids, Err(anyhow::anyhow!("read task: {e}")), sent)
                     }
                 };
+                let wire: u64 = got
+                    .as_ref()
+                    .map_or(0, |items| items.iter().filter_map(|(_, i)| i.as_ref().ok()).map(|(_, b)| *b).sum());
+                meter.finished(sent, now, wire);
                 if let Err(e) = &got
                     && e.downcast_ref::<crate::net::Stale>().is_some()
                 {

@@ -185,7 +185,12 @@ pub fn calibrate(r: &mut Renderer) -> Result<CostModel, RenderError> {
     }
     let gpu = r.upload(&encode_geometry(&mesh))?;
     let geometry = r.sample_costs(&gpu, &[1, 16, 64, 128])?;
-    let fill = r.sample_fill(&[0.25, 0.5, 1.0])?;
-    let textured = r.sample_textured_fill(&[0.25, 0.5, 1.0])?;
+    // Plain and textured fill back to back at each coverage, so that a machine's drift
+    // between them does not pass for the texture's cost.
+    let (mut fill, mut textured) = (Vec::new(), Vec::new());
+    for c in [0.25, 0.5, 1.0] {
+        fill.extend(r.sample_fill(&[c])?);
+        textured.extend(r.sample_textured_fill(&[c])?);
+    }
     Ok(CostModel::calibrate(&geometry, &fill, &textured))
 }

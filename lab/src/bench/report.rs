@@ -40,6 +40,8 @@ pub fn write_csv(path: &Path, runs: &[(String, &[FrameRecord])]) -> std::io::Res
     )?;
     let opt = |x: Option<f64>| x.map_or(String::new(), |v| format!("{v:.4}"));
     for (name, rows) in runs {
+        // A replayed load test run is named after its policy, commas and all.
+        let name = format!("\"{}\"", name.replace('"', "\"\""));
         for r in *rows {
             writeln!(
                 f,
