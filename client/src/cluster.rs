@@ -235,9 +235,13 @@ fn assign(
     let ids: Vec<u32> = nodes.keys().copied().collect();
     for id in &ids {
         let px = f64::from((f.pixels)(*id));
-        let cost = f
-            .cost
-            .cost(u64::from(BOX_TRIANGLES), u64::from(BOX_VERTICES), px);
+        // A textured box samples its atlas: it pays the texture's fill cost as objects do.
+        let cost = f.cost.cost_of(
+            u64::from(BOX_TRIANGLES),
+            u64::from(BOX_VERTICES),
+            px,
+            (f.textured)(*id),
+        );
         if let Some(n) = nodes.get_mut(id) {
             n.box_cost = cost;
         }
@@ -367,7 +371,7 @@ mod tests {
             let f = frame(&cost, budget, &no);
             let mut t = Traversal::default();
             let cut = settle(&mut t, &h, &cands, &f);
-            let root_box = cost.cost(12, 24, 5000.0);
+            let root_box = cost.cost_of(12, 24, 5000.0, true);
             assert!(
                 cut.predicted_s <= budget.max(root_box) + 1e-12,
                 "budget {budget}: {} > {budget}",

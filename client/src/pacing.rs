@@ -24,6 +24,13 @@ pub const INITIAL_CAP: u64 = 256 << 10;
 pub const MIN_CAP: u64 = 64 << 10;
 /// Busy seconds over which older measurements fade (`e`-folding time).
 pub const MEMORY_S: f64 = 1.0;
+/// The round trip is the shortest request of the last this many seconds (as BBR keeps its
+/// minimum round trip): long enough to hold a sample from before the cap filled the link (the
+/// later ones include transfers), short enough to follow a link whose latency rises (a queue at
+/// the server, a new route), where the best ever seen would shrink the cap each round trip.
+pub const RTT_WINDOW_S: f64 = 10.0;
+/// Most request durations kept for the round trip.
+const RTT_SAMPLES: usize = 1024;
 
 /// The link's measured rate and round trip, from the reads' own timings.
 #[derive(Debug, Clone, Default)]
@@ -34,8 +41,8 @@ pub struct LinkMeter {
     /// Requests outstanding, and since when at least one has been.
     outstanding: u32,
     busy_since: Option<Instant>,
-    /// The shortest request seen, send to last byte (seconds).
-    rtt_s: Option<f64>,
+    /// The latest requests' ends and durations, send to last byte (seconds), oldest first.
+    recent: std::collections::VecDeque<(Instant, f64)>,
 }
 
 impl LinkMeter {
@@ -58,8 +65,15 @@ impl LinkMeter {
         self.outstanding = self.outstanding.saturating_sub(1);
         self.busy_since = (self.outstanding > 0).then_some(at);
         if wire_bytes > 0 {
-            let took = at.saturating_duration_since(sent).as_secs_f64();
-            self.rtt_s = Some(self.rtt_s.map_or(took, |r| r.min(took)));
+            self.recent
+                .push_back((at, at.saturating_duration_since(sent).as_secs_f64()));
+            while self.recent.len() > RTT_SAMPLES
+                || self.recent.front().is_some_and(|&(end, _)| {
+                    at.saturating_duration_since(end).as_secs_f64() > RTT_WINDOW_S
+                })
+            {
+                self.recent.pop_front();
+            }
         }
     }
 
@@ -68,16 +82,16 @@ impl LinkMeter {
         (self.bytes > 0.0 && self.busy_s > 0.0).then(|| self.bytes / self.busy_s)
     }
 
-    /// The shortest request seen, send to last byte (seconds): the round trip plus the
-    /// smallest transfer.
+    /// The shortest request that ended in the last [`RTT_WINDOW_S`] seconds, send to last
+    /// byte: the round trip plus the smallest transfer.
     pub fn rtt_s(&self) -> Option<f64> {
-        self.rtt_s
+        self.recent.iter().map(|r| r.1).reduce(f64::min)
     }
 
     /// Most wire bytes to keep in flight: `rate × (round trip + horizon_s)`, at least
     /// [`MIN_CAP`]; [`INITIAL_CAP`] before the first delivery.
     pub fn cap(&self, horizon_s: f64) -> u64 {
-        let (Some(rate), Some(rtt)) = (self.rate(), self.rtt_s) else {
+        let (Some(rate), Some(rtt)) = (self.rate(), self.rtt_s()) else {
             return INITIAL_CAP;
         };
         let horizon = if horizon_s.is_finite() {
@@ -85,7 +99,7 @@ impl LinkMeter {
         } else {
             0.0
         };
-        let cap = rate * (rtt + horizon);
+        let cap = (rate * (rtt + horizon)).round();
         if cap.is_finite() {
             (cap as u64).max(MIN_CAP)
         } else {
@@ -146,6 +160,29 @@ mod tests {
         slow.started(t0);
         slow.finished(t0, ms(t0, 1000), 1000);
         assert_eq!(slow.cap(0.1), MIN_CAP);
+    }
+
+    #[test]
+    fn the_round_trip_follows_a_link_whose_latency_rises() {
+        // Cap-limited reads (one at a time) on a 12.5 MB/s link whose round trip goes from 20
+        // to 150 ms: the cap must not shrink to the minimum.
+        let t0 = Instant::now();
+        let mut m = LinkMeter::default();
+        let mut t = 0.0f64;
+        let mut cap = MIN_CAP;
+        for i in 0..200 {
+            let rtt = if i < 20 { 0.02 } else { 0.15 };
+            let took = rtt + cap as f64 / 12.5e6;
+            let at = |s: f64| t0 + Duration::from_secs_f64(s);
+            m.started(at(t));
+            m.finished(at(t), at(t + took), cap);
+            t += took;
+            cap = m.cap(0.04);
+        }
+        assert!(m.rtt_s().unwrap() > 0.15, "{:?}", m.rtt_s());
+        // With the 20 ms minimum kept for ever the cap would settle at MIN_CAP (64 KiB per
+        // 150 ms); following the new round trip it holds its horizon's worth and more.
+        assert!(cap > 8 * MIN_CAP, "cap {cap}");
     }
 
     #[test]

@@ -255,7 +255,8 @@ pub fn candidates(
 
 /// A textured instance's texels over the whole object at the finest resident mip level (0 with
 /// none resident: it draws in the average colour); `None` for an untextured instance
-/// ([`LodOption::texels`]).
+/// ([`LodOption::texels`]). `uv_span` is the larger axis's repeat count, so a texture repeated
+/// along one axis only is overcounted: the accuracy it feeds saturates long before that matters.
 fn resident_texels(
     header: &Header,
     inst: &portico_data::format::InstanceRecord,

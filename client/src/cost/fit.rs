@@ -7,7 +7,7 @@ use super::{CostModel, DrawSample, Fit};
 
 impl CostModel {
     /// Fits `seconds ≈ overhead + c1·triangles + c2·vertices` to `(triangles, vertices,
-    /// seconds)` samples by non-negative least squares, keeping `c0` and `c3` from `self`.
+    /// seconds)` samples by non-negative least squares, keeping `c0`, `c3` and `c4` from `self`.
     /// Degenerate samples (none, all zero, no slope) leave `self` unchanged (`fitted: false`).
     ///
     /// Samples that repeat one mesh `n` times fold the per-draw overhead into `c1`/`c2` (and,
@@ -35,7 +35,7 @@ impl CostModel {
     }
 
     /// Fits `seconds ≈ overhead + c0·draws + c1·triangles + c2·vertices` by non-negative least
-    /// squares, keeping `c3` from `self`. `c0` is only fitted when the samples vary the number of
+    /// squares, keeping `c3` and `c4` from `self`. `c0` is only fitted when the samples vary the number of
     /// draws independently of the geometry; otherwise the fit puts it in `c1`/`c2` and `c0` is 0.
     pub fn fit_draws(&self, samples: &[DrawSample]) -> Fit {
         let rows = samples.iter().map(|s| {
@@ -61,7 +61,8 @@ impl CostModel {
     }
 
     /// Fits `seconds ≈ overhead + c3·pixels` to `(pixels, seconds)` samples of fill-bound draws
-    /// (few large polygons) by non-negative least squares, keeping `c0..c2` from `self`.
+    /// (few large polygons) by non-negative least squares, keeping `c0..c2` and `c4` from
+    /// `self` (`c4` is what a texture adds to `c3`: refit it after a new `c3`).
     pub fn fit_fill(&self, samples: &[(f64, f64)]) -> Fit {
         let rows = samples.iter().map(|&(p, s)| ([1.0, p], s));
         let solved = solve_nnls(rows);
@@ -83,19 +84,17 @@ impl CostModel {
     /// fill-bound draws, keeping every other coefficient: `c4` is the fitted slope less `c3`
     /// (never negative). Degenerate samples leave `self` unchanged (`fitted: false`).
     pub fn fit_textured_fill(&self, samples: &[(f64, f64)]) -> Fit {
-        let rows = samples.iter().map(|&(p, s)| ([1.0, p], s));
-        let solved = solve_nnls(rows);
-        match solved.filter(|s| s.x[1] > 0.0) {
-            Some(s) => Fit {
-                model: CostModel {
-                    c4: (s.x[1] - self.c3).max(0.0),
-                    ..*self
+        let fit = self.fit_fill(samples);
+        Fit {
+            model: CostModel {
+                c4: if fit.fitted {
+                    (fit.model.c3 - self.c3).max(0.0)
+                } else {
+                    self.c4
                 },
-                overhead_s: s.x[0],
-                rms_error_s: s.rms,
-                fitted: true,
+                ..*self
             },
-            None => self.unfitted(),
+            ..fit
         }
     }
 

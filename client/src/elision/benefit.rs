@@ -12,7 +12,12 @@ pub fn accuracy(params: &Params, triangles: u32, pixels: f32) -> f64 {
     if triangles == 0 {
         return 0.0;
     }
-    let samples = f64::from(triangles).min(finite_or_zero(pixels)).max(1.0);
+    sampled(params, f64::from(triangles).min(finite_or_zero(pixels)))
+}
+
+/// `1 − BaseError / Samples^m`, `Samples` at least 1.
+fn sampled(params: &Params, samples: f64) -> f64 {
+    let samples = samples.max(1.0);
     let denominator = if params.exponent == 1.0 {
         samples
     } else {
@@ -29,13 +34,7 @@ pub fn texture_accuracy(params: &Params, texels: Option<f32>, pixels: f32) -> f6
     let Some(texels) = texels else {
         return 1.0;
     };
-    let samples = finite_or_zero(texels).min(finite_or_zero(pixels)).max(1.0);
-    let denominator = if params.exponent == 1.0 {
-        samples
-    } else {
-        samples.powf(params.exponent)
-    };
-    1.0 - params.base_error / denominator
+    sampled(params, finite_or_zero(texels).min(finite_or_zero(pixels)))
 }
 
 /// Accuracy of drawing `lod` over `pixels` pixels: [`accuracy`] of its triangles times

@@ -192,7 +192,8 @@ pub struct LodOption {
     pub resident: bool,
     /// The texture detail this LOD is drawn with: `None` for an untextured object; for a
     /// textured one the texels of the finest resident mip level over the whole object (the
-    /// level's width × height × the times the texture repeats across it, squared), 0 when this
+    /// level's width × height × the times the texture repeats across it, squared: an upper
+    /// bound, as the repeat count is the larger of the two axes'), 0 when this
     /// LOD draws the texture's average colour (no coordinates, or nothing resident).
     pub texels: Option<f32>,
 }
