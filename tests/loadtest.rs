@@ -139,14 +139,15 @@ fn a_loadtest_measures_the_policy_and_both_baselines_and_writes_its_report() {
 
     // Client 0's drawn frames, one log per run, for `portico bench --replay`.
     for (file, run) in [
-        ("depth_16_gran_object_range_any_look_any", names(&s)[0]),
-        ("demand", "demand"),
-        ("oracle", "oracle"),
+        ("depth_16_gran_object_range_any_look_any.json", names(&s)[0]),
+        ("demand.json", "demand"),
+        ("oracle.json", "oracle"),
     ] {
-        let log = DrawnLog::read(&out.join("drawn").join(format!("{file}.json"))).unwrap();
+        assert_eq!(portico_lab::loadtest::drawn_file(run), file);
+        let log = DrawnLog::read(&out.join("drawn").join(file)).unwrap();
         assert_eq!(log.run, run);
         assert_eq!(log.database_id, s.database_id);
-        assert_eq!(log.dt_s, 0.02);
+        assert_eq!((log.dt_s, log.size, log.fovy_deg), (0.02, (640, 480), 60.0));
         let frames: Vec<usize> = log.frames.iter().map(|f| f.path_frame).collect();
         assert_eq!(frames, (0..40).collect::<Vec<_>>(), "{run}");
         assert!(log.frames.iter().any(|f| !f.objects.is_empty()), "{run}");

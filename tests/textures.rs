@@ -194,6 +194,8 @@ fn drawn_everything(cfg: &BenchConfig, strip: bool) -> DrawnLog {
         database_id: format!("{:016x}{:016x}", p.header_checksum, p.index_checksum),
         path_hash: format!("{:016x}", cfg.path.hash()),
         dt_s: cfg.dt_s,
+        size: cfg.size,
+        fovy_deg: cfg.fovy.to_degrees(),
         frames,
     }
 }
@@ -243,11 +245,32 @@ fn streamed_frames_are_scored_by_drawing_them_again_beside_the_full_detail_ones(
     log.database_id = "0".repeat(32);
     let other = dir.path().join("other.json");
     log.write(&other).unwrap();
-    cfg.replays = vec![other];
+    cfg.replays = vec![other.clone()];
     let e = portico_lab::bench::run(&cfg, &mut |_, _| {}).unwrap_err();
     assert!(format!("{e:#}").contains("other.json"), "{e:#}");
-    cfg.replays = vec![everything];
-    cfg.dt_s = 0.2;
+    // An object the model does not have is named with its frame.
+    let mut log = drawn_everything(&cfg, false);
+    log.frames[3].objects[1].lod = 99;
+    log.write(&other).unwrap();
     let e = portico_lab::bench::run(&cfg, &mut |_, _| {}).unwrap_err();
-    assert!(format!("{e:#}").contains("frame step"), "{e:#}");
+    let e = format!("{e:#}");
+    assert!(
+        e.contains("other.json: frame 3, object 1") && e.contains("not LOD 99"),
+        "{e}"
+    );
+    // Another path, frame step or image size: refused, naming the file and the option.
+    cfg.replays = vec![everything.clone()];
+    for (change, says) in [(0, "--path"), (1, "--frame-step-ms"), (2, "--size")] {
+        let mut c = cfg.clone();
+        match change {
+            0 => c.path.keyframes[0].eye[0] += 0.5,
+            1 => c.dt_s = 0.2,
+            _ => c.size = (64, 48),
+        }
+        let e = format!(
+            "{:#}",
+            portico_lab::bench::run(&c, &mut |_, _| {}).unwrap_err()
+        );
+        assert!(e.contains("everything.json") && e.contains(says), "{e}");
+    }
 }

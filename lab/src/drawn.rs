@@ -5,9 +5,10 @@
 //! frames its cache and link actually allowed, textures included, not on frames with every
 //! segment resident.
 
-use anyhow::{Context, Result, ensure};
+use anyhow::{Context, Result, bail, ensure};
 use portico_client::cluster::Stand;
 use portico_client::frame::Decision;
+use portico_data::format::Header;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -73,8 +74,40 @@ pub struct DrawnLog {
     pub path_hash: String,
     /// Path time between frames (s).
     pub dt_s: f64,
+    /// The image size the frames were decided for (pixels): visibility, screen sizes, LODs.
+    /// Logs that do not say were decided at the load tester's 640 × 480.
+    #[serde(default = "load_test_size")]
+    pub size: (u32, u32),
+    /// The vertical field of view they were decided for (degrees; 60 where a log does not say).
+    #[serde(default = "load_test_fovy")]
+    pub fovy_deg: f32,
     /// The frames, in the order drawn.
     pub frames: Vec<DrawnFrame>,
+}
+
+fn load_test_size() -> (u32, u32) {
+    crate::loadtest::world::SCREEN
+}
+
+fn load_test_fovy() -> f32 {
+    crate::loadtest::world::FOVY_DEG
+}
+
+/// What a log must match to be drawn beside a benchmark's frames ([`DrawnLog::check`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Expected<'a> {
+    /// The benchmark's database id.
+    pub database_id: &'a str,
+    /// Its path's hash.
+    pub path_hash: &'a str,
+    /// Its frame step (s).
+    pub dt_s: f64,
+    /// Its frame count: the log must have path frames `0..frames`.
+    pub frames: u64,
+    /// Its image size (pixels).
+    pub size: (u32, u32),
+    /// Its vertical field of view (degrees).
+    pub fovy_deg: f32,
 }
 
 impl DrawnLog {
@@ -107,29 +140,100 @@ impl DrawnLog {
         }
     }
 
-    /// Checks that the log was drawn from database `database_id` at frame step `dt_s` and
-    /// covers path frames `0..frames`.
+    /// Checks that the log was drawn from the same database, along the same path, at the same
+    /// frame step, image size and field of view as `e` says, and covers path frames
+    /// `0..e.frames`.
     ///
     /// # Errors
-    /// The first mismatch, in a sentence naming `path`.
-    pub fn check(&self, path: &Path, database_id: &str, dt_s: f64, frames: u64) -> Result<()> {
+    /// The first mismatch, in a sentence naming `path` and the option that differs.
+    pub fn check(&self, path: &Path, e: &Expected<'_>) -> Result<()> {
         let name = path.display();
         ensure!(
-            self.database_id == database_id,
-            "{name} was drawn from database {}, not this one ({database_id})",
-            self.database_id
+            self.database_id == e.database_id,
+            "{name} was drawn from database {}, not this one ({})",
+            self.database_id,
+            e.database_id
         );
         ensure!(
-            (self.dt_s - dt_s).abs() <= 1e-9,
-            "{name} was drawn at a frame step of {} s, the benchmark steps {dt_s} s (--frame-step-ms)",
-            self.dt_s
+            self.path_hash == e.path_hash,
+            "{name} was drawn along path {}, not this one ({}): give the bench the load test's --path",
+            self.path_hash,
+            e.path_hash
         );
-        let missing = (0..frames).find(|&f| self.at(f).is_none());
+        ensure!(
+            (self.dt_s - e.dt_s).abs() <= 1e-9,
+            "{name} was drawn at a frame step of {} s, the benchmark steps {} s (--frame-step-ms must equal the load test's --budget-ms)",
+            self.dt_s,
+            e.dt_s
+        );
+        ensure!(
+            self.size == e.size && (self.fovy_deg - e.fovy_deg).abs() <= 1e-3,
+            "{name} was decided for {}x{} pixels and {}°, the benchmark draws {}x{} and {}° (--size, --fov)",
+            self.size.0,
+            self.size.1,
+            self.fovy_deg,
+            e.size.0,
+            e.size.1,
+            e.fovy_deg
+        );
+        let missing = (0..e.frames).find(|&f| self.at(f).is_none());
         ensure!(
             missing.is_none(),
-            "{name} has no frame {} of the {frames} the benchmark draws (--max-frames)",
-            missing.unwrap_or(0)
+            "{name} has no frame {} of the {} the benchmark draws (--max-frames)",
+            missing.unwrap_or(0),
+            e.frames
         );
+        Ok(())
+    }
+
+    /// Checks every object and box against the model: the instance exists and has the LOD,
+    /// the texture segment is one of its material's texture's, the cluster exists and has a
+    /// textured box where one is drawn.
+    ///
+    /// # Errors
+    /// The first entry at fault, naming `path`, the frame and the entry.
+    pub fn validate(&self, path: &Path, header: &Header) -> Result<()> {
+        let name = path.display();
+        for f in &self.frames {
+            for (i, o) in f.objects.iter().enumerate() {
+                let at = format!("{name}: frame {}, object {i}", f.path_frame);
+                let Some(inst) = header.instances.get(o.instance as usize) else {
+                    bail!(
+                        "{at}: no instance {} (the model has {})",
+                        o.instance,
+                        header.instances.len()
+                    );
+                };
+                let lods = header.lods_of(inst).len();
+                ensure!(
+                    (o.lod as usize) < lods,
+                    "{at}: instance {} has {lods} LODs, not LOD {}",
+                    o.instance,
+                    o.lod
+                );
+                if let Some(s) = o.texture {
+                    let ok = header
+                        .texture_of(inst)
+                        .is_some_and(|t| t.segments.iter().any(|m| m.segment == s));
+                    ensure!(
+                        ok,
+                        "{at}: segment {s} is not a segment of instance {}'s texture",
+                        o.instance
+                    );
+                }
+            }
+            let nodes = header.hierarchy.as_ref().map_or(&[][..], |h| &h.nodes[..]);
+            for &(n, textured) in &f.boxes {
+                let at = format!("{name}: frame {}, box {n}", f.path_frame);
+                let Some(node) = nodes.get(n as usize) else {
+                    bail!("{at}: no cluster {n} (the model has {})", nodes.len());
+                };
+                ensure!(
+                    !textured || node.texture != u32::MAX,
+                    "{at}: cluster {n} has no textured box"
+                );
+            }
+        }
         Ok(())
     }
 }
@@ -144,6 +248,8 @@ mod tests {
             database_id: "ab".into(),
             path_hash: "cd".into(),
             dt_s: 0.05,
+            size: (640, 480),
+            fovy_deg: 60.0,
             frames: (0..3)
                 .map(|f| DrawnFrame {
                     path_frame: f,
@@ -161,14 +267,52 @@ mod tests {
         l.frames.swap(0, 2);
         assert_eq!(l.at(0).map(|f| f.path_frame), Some(0), "found out of order");
         let p = Path::new("drawn/demand.json");
-        assert!(l.check(p, "ab", 0.05, 3).is_ok());
-        for (id, dt, frames, says) in [
-            ("xy", 0.05, 3, "not this one (xy)"),
-            ("ab", 0.1, 3, "frame step"),
-            ("ab", 0.05, 4, "no frame 3"),
+        let same = Expected {
+            database_id: "ab",
+            path_hash: "cd",
+            dt_s: 0.05,
+            frames: 3,
+            size: (640, 480),
+            fovy_deg: 60.0,
+        };
+        assert!(l.check(p, &same).is_ok());
+        for (e, says) in [
+            (
+                Expected {
+                    database_id: "xy",
+                    ..same
+                },
+                "not this one (xy)",
+            ),
+            (
+                Expected {
+                    path_hash: "ef",
+                    ..same
+                },
+                "--path",
+            ),
+            (Expected { dt_s: 0.1, ..same }, "--frame-step-ms"),
+            (Expected { frames: 4, ..same }, "no frame 3"),
+            (
+                Expected {
+                    size: (320, 240),
+                    ..same
+                },
+                "--size",
+            ),
+            (
+                Expected {
+                    fovy_deg: 75.0,
+                    ..same
+                },
+                "--fov",
+            ),
         ] {
-            let e = l.check(p, id, dt, frames).unwrap_err().to_string();
-            assert!(e.contains("drawn/demand.json") && e.contains(says), "{e}");
+            let err = l.check(p, &e).unwrap_err().to_string();
+            assert!(
+                err.contains("drawn/demand.json") && err.contains(says),
+                "{err}"
+            );
         }
     }
 

@@ -189,7 +189,7 @@ pub fn loadtest(s: &LoadtestSummary) -> Vec<Verdict> {
             "bytes fetched, prefetch",
             "≤ 2× the oracle's".into(),
             format!(
-                "{:.1} MB vs {:.1} MB per client ({ratio:.1}×)",
+                "{:.1} MB vs {:.1} MB per client ({ratio:.2}×)",
                 p.bytes_fetched_per_client as f64 / 1e6,
                 o.bytes_fetched_per_client as f64 / 1e6
             ),
@@ -301,8 +301,10 @@ fn lods_gain(p: &PolicyResult, d: &PolicyResult) -> Verdict {
         "{:.3} vs {:.3} per frame{}",
         p.lods_skipped_mean,
         d.lods_skipped_mean,
-        if p.lods_skipped_mean > 0.0 {
+        if p.lods_skipped_mean > 0.0 && gain >= 1.0 {
             format!(" ({gain:.1}× fewer)")
+        } else if p.lods_skipped_mean > 0.0 {
+            format!(" ({:.1}× more)", 1.0 / gain.max(1e-9))
         } else {
             String::new()
         }

@@ -269,6 +269,15 @@ fn stress(a: &Args, path: portico_data::path::CameraPath, policy: Policy) -> Res
     Ok(())
 }
 
+/// `ratio` (demand's over prefetch's) as "N.Nx fewer" or, below 1, "N.Nx more".
+fn times(ratio: f64, fewer: &str, more: &str) -> String {
+    if ratio >= 1.0 {
+        format!("{ratio:.1}x {fewer}")
+    } else {
+        format!("{:.1}x {more}", 1.0 / ratio.max(1e-9))
+    }
+}
+
 /// A short human summary: one line per run and the prefetch-vs-demand ratio.
 pub fn print_summary(s: &LoadtestSummary, out: &std::path::Path) {
     println!(
@@ -301,11 +310,11 @@ pub fn print_summary(s: &LoadtestSummary, out: &std::path::Path) {
     if let (Some(best), Some(demand)) = (s.best_prefetch(), s.get("demand")) {
         let fewer = best
             .lods_skipped_vs_demand
-            .map_or("none skipped".into(), |r| format!("{r:.1}x fewer"));
+            .map_or("none skipped".into(), |r| times(r, "fewer", "more"));
         let deficit = best
             .lod_deficit_vs_demand
             .map_or("no LOD deficit".into(), |r| {
-                format!("LOD deficit {r:.1}x smaller")
+                format!("LOD deficit {}", times(r, "smaller", "larger"))
             });
         println!(
             "  best prefetch `{}`: LODs skipped per frame {:.3} against demand fetch's {:.3} ({fewer}; {deficit})",
@@ -316,9 +325,15 @@ pub fn print_summary(s: &LoadtestSummary, out: &std::path::Path) {
         println!("  {v}");
     }
     println!("  report: {}", out.join("report.md").display());
+    let files: Vec<String> = s
+        .policies
+        .iter()
+        .map(|p| portico_lab::loadtest::drawn_file(&p.name))
+        .collect();
     println!(
-        "  client 0's drawn frames: {} (score them: portico bench --replay)",
-        out.join("drawn").display()
+        "  client 0's drawn frames: {}/{{{}}} (score them: portico bench --replay FILE)",
+        out.join("drawn").display(),
+        files.join(",")
     );
 }
 

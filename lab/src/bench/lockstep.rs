@@ -102,9 +102,7 @@ impl<'a> Bench<'a> {
             .map(|kind| Run {
                 kind,
                 name: match kind {
-                    RunKind::Replay(i) => logs
-                        .get(usize::from(i))
-                        .map_or("streamed".to_owned(), |l| format!("streamed {}", l.run)),
+                    RunKind::Replay(i) => replay_name(cfg, &logs, usize::from(i)),
                     _ => kind.name().to_owned(),
                 },
                 decider: Decider::new(kind.algorithm(), cfg.budget_s, None),
@@ -240,7 +238,8 @@ impl<'a> Bench<'a> {
         let t0 = Instant::now();
         let frame = self.logs.get(i).and_then(|l| l.at(v.frame));
         let Some(frame) = frame else {
-            bail!("replay {i} has no frame {}", v.frame);
+            let file = self.cfg.replays.get(i).map(|p| p.display().to_string());
+            bail!("{} has no frame {}", file.unwrap_or_default(), v.frame);
         };
         let mut draws: Vec<Draw<'a>> = frame
             .objects
@@ -442,6 +441,23 @@ impl<'a> Bench<'a> {
             wall_s,
         }
     }
+}
+
+/// `streamed <run>`; when two logs name the same run (two load tests' `demand`), each also
+/// names the directory its `drawn/` is in.
+fn replay_name(cfg: &BenchConfig, logs: &[DrawnLog], i: usize) -> String {
+    let Some(log) = logs.get(i) else {
+        return "streamed".to_owned();
+    };
+    if logs.iter().filter(|l| l.run == log.run).count() < 2 {
+        return format!("streamed {}", log.run);
+    }
+    let dir = cfg
+        .replays
+        .get(i)
+        .and_then(|p| p.parent()?.parent()?.file_name())
+        .map_or(i.to_string(), |d| d.to_string_lossy().into_owned());
+    format!("streamed {} ({dir})", log.run)
 }
 
 fn mean_of(rows: &[FrameRecord], f: impl Fn(&FrameRecord) -> f64) -> f64 {

@@ -67,7 +67,7 @@ pub use summary::{
     RunSummary, SelfTest,
 };
 
-use crate::drawn::DrawnLog;
+use crate::drawn::{DrawnLog, Expected};
 use anyhow::{Context, Result, bail, ensure};
 use critical::CriticalParams;
 use lockstep::Bench;
@@ -256,6 +256,7 @@ impl BenchConfig {
                 out.push(*k);
             }
         }
+        // `run` refuses more than u16::MAX replays.
         let replays = u16::try_from(self.replays.len()).unwrap_or(u16::MAX);
         out.extend((0..replays).map(RunKind::Replay));
         out
@@ -268,13 +269,31 @@ pub fn run(cfg: &BenchConfig, progress: &mut dyn FnMut(u64, u64)) -> Result<Benc
     cfg.validate()?;
     let start = Instant::now();
     std::fs::create_dir_all(&cfg.out).with_context(|| format!("creating {}", cfg.out.display()))?;
+    ensure!(
+        cfg.replays.len() <= usize::from(u16::MAX),
+        "at most {} replays",
+        u16::MAX
+    );
+    // Read before the scene loads, so a typo fails at once.
+    let logs = cfg
+        .replays
+        .iter()
+        .map(|p| DrawnLog::read(p))
+        .collect::<Result<Vec<_>>>()?;
     let mut renderer = Renderer::new(cfg.size.0, cfg.size.1).context("starting the renderer")?;
-    let scene = Scene::load(&cfg.db, &renderer, &cfg.critical)?;
-    let mut logs = Vec::with_capacity(cfg.replays.len());
-    for path in &cfg.replays {
-        let log = DrawnLog::read(path)?;
-        log.check(path, &scene.database_id, cfg.dt_s, cfg.frame_count())?;
-        logs.push(log);
+    let scene = Scene::load(&cfg.db, &renderer, &cfg.critical, !logs.is_empty())?;
+    let path_hash = format!("{:016x}", cfg.path.hash());
+    let expected = Expected {
+        database_id: &scene.database_id,
+        path_hash: &path_hash,
+        dt_s: cfg.dt_s,
+        frames: cfg.frame_count(),
+        size: cfg.size,
+        fovy_deg: cfg.fovy.to_degrees(),
+    };
+    for (log, path) in logs.iter().zip(&cfg.replays) {
+        log.check(path, &expected)?;
+        log.validate(path, &scene.header)?;
     }
     // Funkhouser §4.2.3: C1..C4 from timed sample draws at start-up, as the walk client.
     let cost = portico_render::calibrate(&mut renderer)?;

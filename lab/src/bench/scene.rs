@@ -59,15 +59,22 @@ pub struct Scene {
     pub colour_boxes: Vec<GpuMesh>,
     /// Each cluster's textured box, where it has one.
     pub textured: HashMap<u32, GpuImpostor>,
-    /// Every segment of every material texture, by segment (each holds a whole chain from its
-    /// level down): the finest draws the full-detail frames, the coarser ones replayed
+    /// Material textures by segment (each holds a whole chain from its level down): the
+    /// finest draws the full-detail frames; the coarser ones, loaded for replays only, the
     /// streamed frames.
     pub textures: HashMap<u32, GpuTexture>,
 }
 
 impl Scene {
-    /// Opens `db`, uploads every LOD to `renderer` and precomputes the critical vertices.
-    pub fn load(db: &Path, renderer: &Renderer, params: &CriticalParams) -> Result<Scene> {
+    /// Opens `db`, uploads every LOD to `renderer` and precomputes the critical vertices; with
+    /// `every_mip`, every segment of every texture (replays draw the coarser ones), else each
+    /// texture's finest.
+    pub fn load(
+        db: &Path,
+        renderer: &Renderer,
+        params: &CriticalParams,
+        every_mip: bool,
+    ) -> Result<Scene> {
         let db = Database::open(db).with_context(|| format!("opening {}", db.display()))?;
         let header = db.header().clone();
         let graph = db.cell_graph().context("reading the cell graph")?;
@@ -95,7 +102,7 @@ impl Scene {
             textured: HashMap::new(),
             textures: HashMap::new(),
         };
-        scene.load_textures(&db, renderer)?;
+        scene.load_textures(&db, renderer, every_mip)?;
         scene.load_geometry(&db, renderer, params)?;
         scene.load_clusters(&db, renderer)?;
         Ok(scene)
@@ -141,18 +148,19 @@ impl Scene {
         Ok(())
     }
 
-    /// Uploads every segment of every material texture. `gpu_bytes` counts the finest
-    /// (what the full-detail frames need).
-    fn load_textures(&mut self, db: &Database, renderer: &Renderer) -> Result<()> {
+    /// Uploads each material texture's finest segment, or with `every_mip` every segment.
+    fn load_textures(&mut self, db: &Database, renderer: &Renderer, every_mip: bool) -> Result<()> {
         for (i, t) in self.header.textures.iter().enumerate() {
-            for (k, s) in t.segments.iter().enumerate() {
-                let bytes = db.segment(s.segment)?;
-                let gpu = renderer
-                    .upload_texture(&bytes, t.wrap)
-                    .with_context(|| format!("texture {i} ({})", t.name))?;
-                if k + 1 == t.segments.len() {
-                    self.gpu_bytes += gpu.gpu_bytes();
-                }
+            let skip = if every_mip {
+                0
+            } else {
+                t.segments.len().saturating_sub(1)
+            };
+            for s in &t.segments[skip..] {
+                let at = || format!("texture {i} ({}), segment {}", t.name, s.segment);
+                let bytes = db.segment(s.segment).with_context(at)?;
+                let gpu = renderer.upload_texture(&bytes, t.wrap).with_context(at)?;
+                self.gpu_bytes += gpu.gpu_bytes();
                 self.textures.insert(s.segment, gpu);
             }
         }

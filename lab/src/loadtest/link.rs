@@ -6,10 +6,17 @@
 //! The spec language is `rtt=20ms,rate=100mbit`: durations in `us`, `ms` or `s` (a bare number
 //! is milliseconds), rates in `bit`, `kbit`, `mbit`, `gbit` (SI, bits per second), `b`, `kb`,
 //! `mb`, `gb` (SI bytes per second), `kib`, `mib`, `gib` (binary bytes per second), or `inf`.
+//!
+//! [`Linked`] is a simulated client's [`Fetcher`]: the real HTTP requests through its pipe.
 
+use super::world::World;
+use portico_native::drive::{Fetcher, Items};
+use portico_native::net::Remote;
+use portico_protocol::{PrefetchRequest, PrefetchResponse};
 use serde::Serialize;
 use std::fmt;
-use std::sync::Mutex;
+use std::future::Future;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 use tokio::time::Instant;
 
@@ -197,6 +204,75 @@ impl Pipe {
         if self.link.rtt_s > 0.0 {
             tokio::time::sleep(Duration::from_secs_f64(self.link.rtt_s / 2.0)).await;
         }
+    }
+}
+
+/// A simulated client's [`Fetcher`]: the real HTTP requests, through its emulated link.
+#[derive(Clone)]
+pub(super) struct Linked {
+    pub(super) remote: Remote,
+    pub(super) pipe: Arc<Pipe>,
+    pub(super) world: Arc<World>,
+}
+
+impl Fetcher for Linked {
+    /// What the segment occupies once decoded (a compressed geometry segment is decoded here,
+    /// as the real client's IO thread does, and charged its plain size).
+    type Body = u64;
+
+    fn prefetch(
+        &self,
+        req: PrefetchRequest,
+    ) -> impl Future<Output = anyhow::Result<PrefetchResponse>> + Send + 'static {
+        let me = self.clone();
+        async move {
+            me.pipe.send().await;
+            let resp = me.remote.prefetch(&req).await?;
+            let body = portico_protocol::to_bincode(&resp).map_or(0, |b| b.len() as u64);
+            me.pipe.deliver(body).await;
+            Ok(resp)
+        }
+    }
+
+    fn batch(
+        &self,
+        ids: Vec<u32>,
+    ) -> impl Future<Output = anyhow::Result<Items<u64>>> + Send + 'static {
+        let me = self.clone();
+        async move {
+            me.pipe.send().await;
+            let got = me.remote.batch(&ids).await?;
+            let total = got
+                .iter()
+                .map(|(_, b)| 12 + b.as_ref().map_or(0, |b| b.len() as u64))
+                .sum();
+            me.pipe.deliver(total).await;
+            Ok(got
+                .into_iter()
+                .map(|(id, b)| {
+                    let item = b.and_then(|b| {
+                        let resident = if portico_data::codec::is_compressed(&b) {
+                            portico_data::codec::decode(&b)
+                                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?
+                                .len()
+                        } else {
+                            b.len()
+                        };
+                        Ok((resident as u64, b.len() as u64))
+                    });
+                    (id, item)
+                })
+                .collect())
+        }
+    }
+
+    fn bytes(&self, id: u32) -> u64 {
+        self.world.bytes(id)
+    }
+
+    /// What the IO window is charged: the decoded size.
+    fn held_bytes(&self, id: u32) -> u64 {
+        self.world.decoded(id)
     }
 }
 

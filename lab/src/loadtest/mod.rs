@@ -50,6 +50,22 @@ use sim::Mode;
 use std::path::PathBuf;
 use std::time::Instant;
 
+/// The file in `drawn/` that holds run `run`'s client 0 frames ([`crate::drawn::DrawnLog`]):
+/// the name with everything but ASCII letters, digits and `-` made `_`, then `.json`.
+pub fn drawn_file(run: &str) -> String {
+    let stem: String = run
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    format!("{stem}.json")
+}
+
 /// How many frames ahead the oracle looks (capped at the frames its client has left).
 pub const ORACLE_LOOKAHEAD_FRAMES: u64 = 64;
 /// Seconds at the start of each client's run counted as warm-up (cold cache) in the `*_warm_*`

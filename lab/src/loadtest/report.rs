@@ -393,7 +393,12 @@ fn plots(r: &mut String, s: &LoadtestSummary) {
     );
     let _ = writeln!(
         r,
-        "Client 0's frames as drawn, one log per run, are in `drawn/`: `portico bench --db <the same database> --path <the same path> --frame-step-ms {:.0} --replay drawn/<run>.json -o DIR` draws them beside the full-detail frames and scores them (PSNR, Es, Et).\n",
+        "Client 0's frames as drawn, one log per run, are in `drawn/` ({}): `portico bench --db <the same database> --path <the same path> --frame-step-ms {} --replay drawn/<file> -o DIR` draws them beside the full-detail frames and scores them (PSNR, Es, Et).\n",
+        s.policies
+            .iter()
+            .map(|p| format!("`{}`", super::drawn_file(&p.name)))
+            .collect::<Vec<_>>()
+            .join(", "),
         s.budget_s * 1e3
     );
 }
@@ -428,7 +433,7 @@ pub fn frames_csv(s: &LoadtestSummary) -> String {
             let _ = writeln!(
                 out,
                 "\"{}\",{f},{},{},{},{},{},{},{},{},{},{}",
-                p.name,
+                p.name.replace('"', "\"\""),
                 row.path_frame,
                 row.lods_skipped,
                 row.objects_skipped,

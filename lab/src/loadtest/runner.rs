@@ -31,6 +31,11 @@ pub(super) async fn run_all(
         size_threshold_px: cfg.size_threshold_px(),
     };
     let world = Arc::new(world::load(&remote, &cfg.path, plan).await?);
+    // Last session's drawn frames would pass for this one's.
+    let drawn = cfg.out.join("drawn");
+    if drawn.exists() {
+        std::fs::remove_dir_all(&drawn).with_context(|| format!("clearing {}", drawn.display()))?;
+    }
     let probe = cpu::Probe::new(&cfg.server, cfg.token.clone());
     let total = runs.len() as u64 * cfg.clients as u64 * plan.frames;
     let mut results = Vec::with_capacity(runs.len());
@@ -42,9 +47,9 @@ pub(super) async fn run_all(
             progress(base + d, total)
         })
         .await?;
-        write_drawn(cfg, &world, &name, &mut clients)?;
         let wall_s = t.elapsed().as_secs_f64();
         let usage = probe.usage(before, probe.sample().await);
+        write_drawn(cfg, &world, &name, &mut clients)?;
         results.push(aggregate(name, mode, cfg, clients, wall_s, usage));
     }
     compare_with_demand(&mut results);
@@ -95,19 +100,11 @@ fn write_drawn(
         database_id: world.database_id.clone(),
         path_hash: format!("{:016x}", cfg.path.hash()),
         dt_s: cfg.budget_s,
+        size: world::SCREEN,
+        fovy_deg: world::FOVY_DEG,
         frames: std::mem::take(&mut first.drawn),
     };
-    let file: String = run
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
-    log.write(&dir.join(format!("{file}.json")))
+    log.write(&dir.join(super::drawn_file(run)))
 }
 
 /// The "0 frames" curve along client 0's frames (client 0 starts at path frame 0).

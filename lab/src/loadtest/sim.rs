@@ -14,7 +14,7 @@
 //! - [`Mode::Oracle`]: knows the future path; each frame it asks for what an omniscient client
 //!   would draw in the next frames, nearest in time first.
 
-use super::link::Pipe;
+use super::link::{Linked, Pipe};
 use super::world::World;
 use crate::drawn::DrawnFrame;
 use portico_client::cache::ObjectCache;
@@ -22,9 +22,9 @@ use portico_client::cost::CostModel;
 use portico_client::elision::{Algorithm, Candidate, Choice};
 use portico_client::frame::{Decider, Decision, Resident};
 use portico_data::cells::StabList;
-use portico_native::drive::{Ask, Event, Fetcher, Items, drive};
+use portico_native::drive::{Ask, Event, drive};
 use portico_native::net::Remote;
-use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse};
+use portico_protocol::Policy;
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -154,10 +154,14 @@ pub async fn client(s: Setup) -> ClientResult {
         pipe: s.pipe.clone(),
         world: s.world.clone(),
     };
-    // Demand fetch and the oracle make their own lists; the policy only matters to prefetch.
+    // Demand fetch and the oracle make their own lists; of the policy they use only the frame
+    // time, which paces every run's reads alike.
     let policy = match s.mode {
         Mode::Prefetch(p) => p,
-        Mode::Demand | Mode::Oracle { .. } => Policy::default(),
+        Mode::Demand | Mode::Oracle { .. } => Policy {
+            frame_time_s: s.world.dt as f32,
+            ..Policy::default()
+        },
     };
     let window = portico_client::cache::split_budget(s.cache_bytes).1;
     let task = tokio::spawn(drive(link, policy, PARALLEL, window, state_rx, tx));
@@ -498,75 +502,6 @@ fn count(row: &mut FrameStat, c: &Candidate, ch: &Choice) {
     } else {
         ch.lods_skipped
     };
-}
-
-/// A simulated client's [`Fetcher`]: the real HTTP requests, through its emulated link.
-#[derive(Clone)]
-struct Linked {
-    remote: Remote,
-    pipe: Arc<Pipe>,
-    world: Arc<World>,
-}
-
-impl Fetcher for Linked {
-    /// What the segment occupies once decoded (a compressed geometry segment is decoded here,
-    /// as the real client's IO thread does, and charged its plain size).
-    type Body = u64;
-
-    fn prefetch(
-        &self,
-        req: PrefetchRequest,
-    ) -> impl Future<Output = anyhow::Result<PrefetchResponse>> + Send + 'static {
-        let me = self.clone();
-        async move {
-            me.pipe.send().await;
-            let resp = me.remote.prefetch(&req).await?;
-            let body = portico_protocol::to_bincode(&resp).map_or(0, |b| b.len() as u64);
-            me.pipe.deliver(body).await;
-            Ok(resp)
-        }
-    }
-
-    fn batch(
-        &self,
-        ids: Vec<u32>,
-    ) -> impl Future<Output = anyhow::Result<Items<u64>>> + Send + 'static {
-        let me = self.clone();
-        async move {
-            me.pipe.send().await;
-            let got = me.remote.batch(&ids).await?;
-            let total = got
-                .iter()
-                .map(|(_, b)| 12 + b.as_ref().map_or(0, |b| b.len() as u64))
-                .sum();
-            me.pipe.deliver(total).await;
-            Ok(got
-                .into_iter()
-                .map(|(id, b)| {
-                    let item = b.and_then(|b| {
-                        let resident = if portico_data::codec::is_compressed(&b) {
-                            portico_data::codec::decode(&b)
-                                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?
-                                .len()
-                        } else {
-                            b.len()
-                        };
-                        Ok((resident as u64, b.len() as u64))
-                    });
-                    (id, item)
-                })
-                .collect())
-        }
-    }
-
-    fn bytes(&self, id: u32) -> u64 {
-        self.world.bytes(id)
-    }
-
-    /// What the IO window is charged: the decoded size.
-    fn held_bytes(&self, id: u32) -> u64 {
-        self.world.decoded(id)
-    }
 }
 
 #[cfg(test)]
