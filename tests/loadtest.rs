@@ -249,13 +249,16 @@ fn prefetch_beats_demand_fetch_over_the_whole_run_on_a_slow_link() {
     let s = run(&cfg, &mut |_, _| {}).unwrap();
     let (prefetch, demand) = (&s.policies[0], s.get("demand").unwrap());
     eprintln!(
-        "LOD deficit {:.3} vs {:.3}; LODs skipped {:.3} vs {:.3}; objects skipped {:.3} vs {:.3}",
+        "LOD deficit {:.3} vs {:.3}; LODs skipped {:.3} vs {:.3}; objects skipped {:.3} vs {:.3}; \
+         first complete frame {:?} vs {:?}",
         prefetch.lod_deficit_mean,
         demand.lod_deficit_mean,
         prefetch.lods_skipped_mean,
         demand.lods_skipped_mean,
         prefetch.objects_skipped_mean,
-        demand.objects_skipped_mean
+        demand.objects_skipped_mean,
+        prefetch.first_complete_frame_mean,
+        demand.first_complete_frame_mean,
     );
     assert!(
         prefetch.lod_deficit_mean < demand.lod_deficit_mean,
@@ -268,6 +271,22 @@ fn prefetch_beats_demand_fetch_over_the_whole_run_on_a_slow_link() {
         "objects skipped per frame: prefetch {} vs demand {}",
         prefetch.objects_skipped_mean,
         demand.objects_skipped_mean
+    );
+    // Cold start: what the frame lacks is read while the first answer is on its way, so the
+    // first complete frame comes with demand fetch's (measured here: at most a third of a
+    // frame later on the mean of 3 clients; before, up to 3.3 frames later). A frame of slack
+    // keeps a busy machine's jitter out; the ordering itself is tested in `drive.rs`.
+    let (p, d) = (
+        prefetch
+            .first_complete_frame_mean
+            .expect("prefetch: a complete frame"),
+        demand
+            .first_complete_frame_mean
+            .expect("demand: a complete frame"),
+    );
+    assert!(
+        p <= d + 1.0,
+        "first complete frame: prefetch {p} vs demand {d}"
     );
 }
 

@@ -10,6 +10,8 @@
 //! - [`cluster`]: Maciel's best-first traversal of the model hierarchy (§6.4).
 //! - [`cost`]: the cost model (§4.2.3) and its online correction.
 //! - [`cache`]: the LRU object cache under a hard byte budget (§5.2.3).
+//! - [`demand`]: what a frame lacked, most urgent first (§5.2.4): demand fetch's need list and
+//!   the head of every other.
 //! - [`schedule`]: the read schedule of the IO stage (§5.2.3, Ch. 6); [`pacing`]: what it
 //!   keeps in flight on the measured link.
 //! - [`navigate`]: Funkhouser's mouse-and-keyboard navigation (§3.3.1).
@@ -18,6 +20,7 @@
 pub mod cache;
 pub mod cluster;
 pub mod cost;
+pub mod demand;
 pub mod elision;
 pub mod frame;
 pub mod navigate;

@@ -4,9 +4,11 @@
 //! clients (`portico_lab::loadtest`); what differs is the [`Fetcher`] (HTTP and a GPU upload,
 //! or HTTP through an emulated link) and where the need list comes from:
 //! - from the server: each published frame state becomes a `POST /v1/prefetch` (one at a time;
-//!   a newer state waits for the answer in flight), and the answer's items become the list;
+//!   a newer state waits for the answer in flight), and the answer's items become the list,
+//!   behind what the latest frame lacked ([`Ask::lacking`], fetched as demand fetch would);
 //! - from the client itself ([`Ask::wants`]): demand fetch and the oracle of the load tester.
 
+use portico_client::demand::ahead_of;
 use portico_client::pacing::LinkMeter;
 use portico_client::schedule::Schedule;
 use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
@@ -28,6 +30,10 @@ pub struct Ask {
     /// The client's own need list, most urgent first (demand fetch, oracle); `None` asks the
     /// server's lookahead instead.
     pub wants: Option<Vec<u32>>,
+    /// What the frame lacked, most urgent first ([`portico_client::demand::lacking`]): with
+    /// `wants` `None`, read ahead of the server's latest answer, which is a round trip old and
+    /// may not have come yet (a cold start).
+    pub lacking: Vec<u32>,
     /// When the frame loop published this.
     pub at: Instant,
 }
@@ -105,6 +111,10 @@ pub async fn drive<F: Fetcher>(
     // and when it was sent.
     let mut batches: HashMap<tokio::task::Id, (Vec<u32>, Instant)> = HashMap::new();
     let mut asking: Option<JoinHandle<Answered>> = None;
+    // The server's latest need list, and what the latest frame lacked: read in that order,
+    // the frame's first.
+    let mut answer: Vec<u32> = Vec::new();
+    let mut lacking: Vec<u32> = Vec::new();
     // A frame state the server has not yet been asked about.
     let mut unasked: Option<Ask> = None;
     loop {
@@ -139,7 +149,13 @@ pub async fn drive<F: Fetcher>(
                 s.acknowledge(ask.consumed, ask.wants.is_none());
                 match ask.wants {
                     Some(ref wants) => s.refresh(wants.clone(), ask.at),
-                    None => unasked = Some(ask),
+                    None => {
+                        if ask.lacking != lacking {
+                            lacking = ask.lacking.clone();
+                            s.refresh(ahead_of(&lacking, answer.iter().copied()), ask.at);
+                        }
+                        unasked = Some(ask);
+                    }
                 }
                 continue;
             }
@@ -148,7 +164,8 @@ pub async fn drive<F: Fetcher>(
                 match answered {
                     Ok((ask, at, Ok(resp))) => {
                         s.answered(ask);
-                        s.refresh(resp.items.iter().map(|i| i.segment).collect(), at);
+                        answer = resp.items.iter().map(|i| i.segment).collect();
+                        s.refresh(ahead_of(&lacking, answer.iter().copied()), at);
                         Event::Answer(Box::new(resp))
                     }
                     Ok((_, _, Err(e))) if e.downcast_ref::<crate::net::Stale>().is_some() => {
@@ -277,4 +294,138 @@ fn ask_server<F: Fetcher>(
         let at = Instant::now();
         (number, at, f.prefetch(req).await)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use portico_protocol::{NeedItem, NeedKind};
+    use std::sync::{Arc, Mutex};
+    use std::time::Duration;
+
+    /// A server that answers every prefetch request with `answer` after `delay`, and records
+    /// each read request's ids.
+    #[derive(Clone)]
+    struct Fake {
+        answer: Vec<u32>,
+        delay: Duration,
+        reads: Arc<Mutex<Vec<Vec<u32>>>>,
+    }
+
+    impl Fetcher for Fake {
+        type Body = ();
+
+        fn prefetch(
+            &self,
+            _: PrefetchRequest,
+        ) -> impl Future<Output = anyhow::Result<PrefetchResponse>> + Send + 'static {
+            let (items, delay) = (self.answer.clone(), self.delay);
+            async move {
+                tokio::time::sleep(delay).await;
+                Ok(PrefetchResponse {
+                    version: PROTOCOL_VERSION,
+                    items: items
+                        .into_iter()
+                        .map(|segment| NeedItem {
+                            segment,
+                            kind: NeedKind::Geometry,
+                            lod: 0,
+                            bytes: 1000,
+                            frames: 1,
+                        })
+                        .collect(),
+                    evict: Vec::new(),
+                    range_cells: 1,
+                    lookahead_cells: 1,
+                    lookahead_objects: 1,
+                    lookahead_bytes: 0,
+                    truncated: false,
+                    micros: 0,
+                })
+            }
+        }
+
+        fn batch(
+            &self,
+            ids: Vec<u32>,
+        ) -> impl Future<Output = anyhow::Result<Items<()>>> + Send + 'static {
+            self.reads.lock().unwrap().push(ids.clone());
+            async move { Ok(ids.into_iter().map(|id| (id, Ok(((), 1000)))).collect()) }
+        }
+
+        fn bytes(&self, _: u32) -> u64 {
+            1000
+        }
+    }
+
+    fn ask(lacking: Vec<u32>) -> Ask {
+        let o = [0.0; 3];
+        Ask {
+            observer: Observer {
+                eye: o,
+                dir: [0.0, 0.0, -1.0],
+                up: [0.0, 1.0, 0.0],
+                velocity: o,
+                half_fov_x: 0.5,
+                half_fov_y: 0.4,
+                max_speed: 1.0,
+                max_turn: 1.0,
+            },
+            held: Vec::new(),
+            consumed: 0,
+            wants: None,
+            lacking,
+            at: Instant::now(),
+        }
+    }
+
+    /// Runs the driver against `fake` with one published frame state, and returns the ids in
+    /// the order the reads asked for them once `n` segments arrived.
+    async fn reads_after(fake: Fake, state: Ask, n: usize) -> Vec<u32> {
+        let (state_tx, state_rx) = watch::channel(None);
+        let (tx, mut rx) = mpsc::channel(64);
+        let task = tokio::spawn(drive(
+            fake.clone(),
+            Policy::default(),
+            1,
+            1 << 30,
+            state_rx,
+            tx,
+        ));
+        state_tx.send(Some(state)).unwrap();
+        let mut got = 0;
+        while got < n {
+            match tokio::time::timeout(Duration::from_secs(10), rx.recv()).await {
+                Ok(Some(Event::Segment { .. })) => got += 1,
+                Ok(Some(_)) => {}
+                Ok(None) | Err(_) => panic!("only {got} of {n} segments arrived"),
+            }
+        }
+        drop(state_tx);
+        task.abort();
+        fake.reads.lock().unwrap().concat()
+    }
+
+    #[tokio::test]
+    async fn a_cold_start_reads_what_the_frame_lacks_before_the_answer_comes() {
+        let fake = Fake {
+            answer: vec![100, 101],
+            delay: Duration::from_millis(300),
+            reads: Arc::default(),
+        };
+        // The answer is 300 ms away: the frame's stab list and stand-ins are read meanwhile.
+        let reads = reads_after(fake, ask(vec![7, 8, 9]), 5).await;
+        assert_eq!(reads, vec![7, 8, 9, 100, 101]);
+    }
+
+    #[tokio::test]
+    async fn what_the_frame_lacks_goes_ahead_of_the_answer_and_is_not_read_twice() {
+        let fake = Fake {
+            answer: vec![100, 8, 101],
+            delay: Duration::ZERO,
+            reads: Arc::default(),
+        };
+        let reads = reads_after(fake, ask(vec![8]), 3).await;
+        assert_eq!(reads, vec![8, 100, 101]);
+    }
 }

@@ -6,13 +6,15 @@
 //!   every frame, the server pushes in need order what the cache lacks;
 //! - **pull** (the fallback, and `?transport=pull`): the native client's read [`Schedule`] over
 //!   HTTP — one prefetch request in flight at a time (a newer observer waits for its answer)
-//!   and up to [`PARALLEL`] segment batches from the top of the latest answer.
+//!   and up to [`PARALLEL`] segment batches from the top of the latest list: what the last
+//!   frame lacked, then the latest answer's items.
 //!
 //! A stream that does not open within [`OPEN_WAIT`], or closes (a server restart), hands over
 //! to pull at once and is tried again after [`RETRY`].
 
 use crate::net::{Remote, Stale};
 use crate::stream::{Pushed, Stream};
+use portico_client::demand::ahead_of;
 use portico_client::schedule::Schedule;
 use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
 use std::cell::RefCell;
@@ -87,6 +89,10 @@ pub struct Io {
     ask_after: Option<Instant>,
     /// Whether the stream carried the segments at the last frame.
     was_pushing: bool,
+    /// The latest answer's need list, and what the latest frame lacked: read in that order,
+    /// the frame's first (as `portico_native::drive`).
+    answer: Vec<u32>,
+    lacking: Vec<u32>,
 }
 
 impl Io {
@@ -107,6 +113,8 @@ impl Io {
             sessions: 0,
             ask_after: None,
             was_pushing: false,
+            answer: Vec::new(),
+            lacking: Vec::new(),
             remote,
             catalogue: Rc::new(catalogue),
             policy,
@@ -132,8 +140,9 @@ impl Io {
                     match answer {
                         Ok(resp) => {
                             self.schedule.answered(ask);
-                            self.schedule
-                                .refresh(resp.items.iter().map(|i| i.segment).collect(), at);
+                            self.answer = resp.items.iter().map(|i| i.segment).collect();
+                            let list = ahead_of(&self.lacking, self.answer.iter().copied());
+                            self.schedule.refresh(list, at);
                             out.push(Arrival::Release(resp.evict));
                         }
                         Err(e) => {
@@ -269,6 +278,8 @@ impl Io {
         if pushing && !self.was_pushing {
             // The stream takes over: what pull still meant to read is the stream's now.
             self.schedule.refresh(Vec::new(), now);
+            self.answer.clear();
+            self.lacking.clear();
         }
         self.was_pushing = pushing;
         pushing
@@ -284,10 +295,16 @@ impl Io {
 
     /// After a frame: asks the server about `observer` unless an answer is pending, and keeps
     /// up to [`PARALLEL`] batches in flight from the top of the latest read list. `held`: the
-    /// segments resident in the cache.
-    pub fn pump(&mut self, observer: Observer, held: impl Iterator<Item = u32>) {
+    /// segments resident in the cache; `lacking`: what the frame lacked, read first
+    /// ([`portico_client::demand`]).
+    pub fn pump(&mut self, observer: Observer, held: impl Iterator<Item = u32>, lacking: Vec<u32>) {
         if self.stopped || self.pushing(observer) {
             return;
+        }
+        if lacking != self.lacking {
+            self.lacking = lacking;
+            let list = ahead_of(&self.lacking, self.answer.iter().copied());
+            self.schedule.refresh(list, Instant::now());
         }
         if !self.asking && self.ask_after.is_none_or(|t| Instant::now() >= t) {
             self.asking = true;

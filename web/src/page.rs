@@ -248,6 +248,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         nav: navigator(eye, dir),
         touring: None,
         too_big: Default::default(),
+        lacking: Vec::new(),
         drawn: Vec::new(),
         stats: Stats {
             cache_budget: cache_bytes,

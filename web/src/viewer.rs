@@ -8,6 +8,7 @@ use crate::io::{Arrival, Io};
 use glam::Vec3;
 use portico_client::cache::ObjectCache;
 use portico_client::cost::CostModel;
+use portico_client::demand::lacking;
 use portico_client::elision::Algorithm;
 use portico_client::frame::{Decider, Scene};
 use portico_client::navigate::Navigator;
@@ -125,6 +126,9 @@ pub struct Viewer {
     /// Segments larger than the whole cache, or unusable here: reported as held so that no
     /// answer lists them again and no stream pushes them again.
     pub too_big: std::collections::HashSet<u32>,
+    /// What the last frame lacked ([`portico_client::demand::lacking`]), read ahead of the
+    /// server's answer when pulling.
+    pub lacking: Vec<u32>,
     pub stats: Stats,
     /// The instances drawn in the last frame (for the mini-map).
     pub drawn: Vec<u32>,
@@ -257,7 +261,8 @@ impl Viewer {
             .ids()
             .chain(self.too_big.iter().copied())
             .collect();
-        self.io.pump(obs, held.into_iter());
+        self.io
+            .pump(obs, held.into_iter(), std::mem::take(&mut self.lacking));
         self.stats.transport = self.io.transport();
         self.stats.stream_sessions = self.io.sessions;
         self.stats.eye = eye.to_array();
@@ -288,6 +293,8 @@ impl Viewer {
         self.stats.visible_objects = d.visible.objects.len() as u32;
         self.stats.objects_skipped = d.frame.objects_skipped;
         self.stats.lods_skipped = d.frame.lods_skipped;
+        let (cache, too_big) = (&self.cache, &self.too_big);
+        self.lacking = lacking(&d, &scene, &|s| cache.contains(s) || too_big.contains(&s));
         if self.stats.first_complete_frame.is_none()
             && !d.visible.objects.is_empty()
             && d.frame.objects_skipped == 0

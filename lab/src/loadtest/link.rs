@@ -7,7 +7,7 @@
 //! is milliseconds), rates in `bit`, `kbit`, `mbit`, `gbit` (SI, bits per second), `b`, `kb`,
 //! `mb`, `gb` (SI bytes per second), `kib`, `mib`, `gib` (binary bytes per second), or `inf`.
 //!
-//! [`Linked`] is a simulated client's [`Fetcher`]: the real HTTP requests through its pipe.
+//! `Linked` is a simulated client's [`Fetcher`]: the real HTTP requests through its pipe.
 
 use super::world::World;
 use portico_native::drive::{Fetcher, Items};

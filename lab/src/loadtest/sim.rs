@@ -7,8 +7,9 @@
 //! Its IO task is the real client's ([`portico_native::drive::drive`]) fetching through the
 //! client's emulated [`Pipe`], with its need list made in one of three ways:
 //! - [`Mode::Prefetch`]: the server's lookahead, as the real client: post the observer and the
-//!   held set to `/v1/prefetch` once per frame, demote the eviction hints, read the latest
-//!   answer's items in need order a few at a time (Funkhouser §5.2–5.3);
+//!   held set to `/v1/prefetch` once per frame, demote the eviction hints, read what the
+//!   frame lacked and then the latest answer's items in need order a few at a time
+//!   (Funkhouser §5.2–5.3);
 //! - [`Mode::Demand`]: no lookahead; each frame the client asks for exactly the LODs its elider
 //!   wanted and did not have (and the eye cell's stab list), computed from its visible set;
 //! - [`Mode::Oracle`]: knows the future path; each frame it asks for what an omniscient client
@@ -19,6 +20,7 @@ use super::world::World;
 use crate::drawn::DrawnFrame;
 use portico_client::cache::ObjectCache;
 use portico_client::cost::CostModel;
+use portico_client::demand::{ahead_of, lacking};
 use portico_client::elision::{Algorithm, Candidate, Choice};
 use portico_client::frame::{Decider, Decision, Resident};
 use portico_data::cells::StabList;
@@ -289,7 +291,7 @@ impl Client {
 
     /// Visibility → candidates (capped at the size threshold) → elision over resident LODs,
     /// for path frame `p`.
-    fn frame(&mut self, p: usize) -> (FrameStat, Decided) {
+    fn frame(&mut self, p: usize) -> (FrameStat, Decision) {
         let w = self.world.clone();
         let scene = w.scene();
         let d = self.decider.decide(
@@ -332,26 +334,20 @@ impl Client {
                 e.1 = true;
             }
         }
-        let segments = (0..d.candidates.len())
-            .map(|i| d.segments(&scene, i))
-            .collect();
-        (
-            row,
-            Decided {
-                decision: d,
-                segments,
-            },
-        )
+        (row, d)
     }
 
     /// What the IO task gets after frame `f` (path frame `p`).
-    fn publish(&mut self, p: usize, f: u64, d: &Decided) -> Ask {
-        let wants = match self.mode {
-            Mode::Prefetch(_) => None,
-            Mode::Demand => Some(self.demand_wants(d)),
+    fn publish(&mut self, p: usize, f: u64, d: &Decision) -> Ask {
+        let (wants, lacking) = match self.mode {
+            Mode::Prefetch(_) => (None, self.missing_now(d)),
+            Mode::Demand => (Some(self.demand_wants(d)), Vec::new()),
             Mode::Oracle { lookahead } => {
                 let left = self.frames.saturating_sub(f);
-                Some(self.oracle_wants(p, lookahead.min(left), d))
+                (
+                    Some(self.oracle_wants(p, lookahead.min(left), d)),
+                    Vec::new(),
+                )
             }
         };
         Ask {
@@ -359,65 +355,26 @@ impl Client {
             held: self.cache.ids().collect(),
             consumed: self.consumed,
             wants,
+            lacking,
             at: Instant::now(),
         }
     }
 
-    /// What this frame lacked, most urgent first: the eye cell's stab list, the coarsest LOD of
-    /// every wanted object with nothing to draw (a coarse LOD of everything visible first,
-    /// Funkhouser 1993 §5.2.4), then every wanted LOD not resident; biggest objects on screen first.
-    fn missing_now(&self, d: &Decided) -> Vec<u32> {
-        let mut stand_ins = Vec::new();
-        let mut wanted = Vec::new();
-        let decision = &d.decision;
-        for (i, (c, ch)) in decision
-            .candidates
-            .iter()
-            .zip(&decision.frame.choices)
-            .enumerate()
-        {
-            let Some(want) = ch.desired else { continue };
-            let segs = &d.segments[i];
-            if ch.lod.is_none()
-                && let Some(&coarsest) = segs.last()
-                && !self.cache.contains(coarsest)
-            {
-                stand_ins.push((c.pixels, coarsest));
-            }
-            if !self.cache.contains(segs[want]) {
-                wanted.push((c.pixels, segs[want]));
-            }
-        }
-        // The texture level each drawn object's size asks for, when it lacks it.
-        for o in &decision.drawn {
-            if let Some(t) = o.wants_texture.filter(|&t| !self.cache.contains(t)) {
-                let pixels = decision
-                    .candidates
-                    .iter()
-                    .find(|c| c.id == o.instance)
-                    .map_or(0.0, |c| c.pixels);
-                wanted.push((pixels, t));
-            }
-        }
-        stand_ins.sort_by(|a, b| b.0.total_cmp(&a.0));
-        wanted.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let stab = decision.eye_stab.filter(|&s| !self.cache.contains(s));
-        let all = stab
-            .into_iter()
-            .chain(stand_ins.into_iter().map(|x| x.1))
-            .chain(wanted.into_iter().map(|x| x.1));
-        unique(all)
+    /// What this frame lacked, most urgent first ([`portico_client::demand::lacking`]).
+    fn missing_now(&self, d: &Decision) -> Vec<u32> {
+        let scene = self.world.scene();
+        lacking(d, &scene, &|s| self.cache.contains(s))
     }
 
     /// Demand fetch: exactly what this frame lacked.
-    fn demand_wants(&self, d: &Decided) -> Vec<u32> {
+    fn demand_wants(&self, d: &Decision) -> Vec<u32> {
         self.missing_now(d)
     }
 
     /// The oracle: what this frame lacked, then what will be drawn in the next `k` frames,
     /// nearest first, up to the cache budget; what of it is resident moves to the head of the
     /// cache (nearest last, so headmost).
-    fn oracle_wants(&mut self, p: usize, k: u64, d: &Decided) -> Vec<u32> {
+    fn oracle_wants(&mut self, p: usize, k: u64, d: &Decision) -> Vec<u32> {
         let w = self.world.clone();
         let n = w.path_frames();
         let mut window = Vec::new();
@@ -442,8 +399,10 @@ impl Client {
             self.cache.touch(s);
         }
         let now = self.missing_now(d);
-        let ahead = window.into_iter().filter(|&s| !self.cache.contains(s));
-        unique(now.into_iter().chain(ahead))
+        ahead_of(
+            &now,
+            window.into_iter().filter(|&s| !self.cache.contains(s)),
+        )
     }
 
     /// Counts what was never drawn among the segments still resident.
@@ -477,19 +436,6 @@ impl Resident for Held<'_> {
             .then(|| self.1.stabs.get(&cell).cloned())
             .flatten()
     }
-}
-
-/// One frame's decision, as the IO side needs it.
-struct Decided {
-    decision: Decision,
-    /// Per candidate, the segments of its (capped) LODs, finest first.
-    segments: Vec<Vec<u32>>,
-}
-
-/// The items in their first order, each once.
-fn unique(ids: impl Iterator<Item = u32>) -> Vec<u32> {
-    let mut seen = HashSet::new();
-    ids.filter(|&s| seen.insert(s)).collect()
 }
 
 /// Adds one candidate's choice to a frame's counts.

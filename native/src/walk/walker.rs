@@ -11,6 +11,7 @@ use glam::{Mat4, Vec3};
 use portico_client::cache::ObjectCache;
 use portico_client::cluster::Stand;
 use portico_client::cost::{CostModel, OnlineCost};
+use portico_client::demand::lacking;
 use portico_client::frame::{Decider, Scene};
 use portico_client::stats::{FrameRow, Series, write_csv};
 use portico_client::view::{self, Viewpoint};
@@ -33,6 +34,8 @@ pub(super) struct Walker<'a> {
     colour_boxes: std::collections::HashMap<u32, GpuMesh>,
     /// Segments larger than the whole cache: reported as held so no answer lists them again.
     too_big: std::collections::HashSet<u32>,
+    /// What the last frame lacked ([`portico_client::demand::lacking`]), for the IO stage.
+    lacking: Vec<u32>,
     latencies: Vec<f64>,
     failures: u64,
     database_changed: bool,
@@ -65,6 +68,7 @@ impl<'a> Walker<'a> {
             consumed: 0,
             colour_boxes: std::collections::HashMap::new(),
             too_big: std::collections::HashSet::new(),
+            lacking: Vec::new(),
             latencies: Vec::new(),
             failures: 0,
             database_changed: false,
@@ -181,6 +185,8 @@ impl<'a> Walker<'a> {
         row.predicted_s = d.frame.predicted_s;
         row.lods_skipped = d.frame.lods_skipped;
         row.objects_skipped = d.frame.objects_skipped;
+        let (cache, too_big) = (&self.cache, &self.too_big);
+        self.lacking = lacking(&d, &scene, &|s| cache.contains(s) || too_big.contains(&s));
 
         if let Some(h) = &self.model.header.hierarchy {
             make_colour_boxes(&mut self.colour_boxes, h, &d.boxes, r);
@@ -232,6 +238,7 @@ impl<'a> Walker<'a> {
                 .collect(),
             consumed: self.consumed,
             wants: None,
+            lacking: self.lacking.clone(),
             at: std::time::Instant::now(),
         }));
     }
