@@ -253,6 +253,9 @@ pub const GEOMETRY_U32_INDICES: u16 = 1;
 pub const GEOMETRY_MESHOPT: u16 = 2;
 /// Flag: a texture-coordinate stream (`[f32; 2]` per vertex) follows the vertex stream.
 pub const GEOMETRY_UV: u16 = 4;
+/// Flag (with [`GEOMETRY_MESHOPT`]): everything after the header is raw deflate (RFC 1951) of
+/// the meshopt segment's body (`codec`); segments without it are meshopt alone.
+pub const GEOMETRY_DEFLATE: u16 = 8;
 
 /// The fixed 32-byte header at the start of a geometry segment.
 #[repr(C)]
