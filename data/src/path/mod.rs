@@ -100,7 +100,9 @@ impl CameraPath {
         self.keyframes.last().map_or(0.0, |k| k.t)
     }
 
-    /// Eye and view direction at time `t` (clamped to the path), interpolated linearly.
+    /// Eye and view direction at time `t` (clamped to the path): the eye moves in a straight
+    /// line between keyframes and the view turns from one direction to the next at a steady
+    /// rate ([`turn_between`]).
     pub fn sample(&self, t: f32) -> (Vec3, Vec3) {
         let k = &self.keyframes;
         let Some(first) = k.first() else {
@@ -117,8 +119,7 @@ impl CameraPath {
         let (a, b) = (k[i - 1], k[i]);
         let s = ((t - a.t) / (b.t - a.t).max(1e-6)).clamp(0.0, 1.0);
         let eye = Vec3::from(a.eye).lerp(b.eye.into(), s);
-        let dir = Vec3::from(a.dir).lerp(b.dir.into(), s);
-        (eye, dir.try_normalize().unwrap_or(Vec3::from(b.dir)))
+        (eye, turn_between(a.dir.into(), b.dir.into(), s))
     }
 
     /// Checks that times increase and every number is finite.
@@ -457,9 +458,59 @@ pub fn portal_chain_by(
     None
 }
 
+/// The unit direction a share `s` (0 to 1) of the way from `a` to `b`, turning at a steady
+/// angular rate along the great circle (a linear blend would stand still and then flip at
+/// once between opposite directions). Opposite directions turn about the vertical (about X
+/// when they are vertical themselves); a zero direction is replaced by the other one.
+pub fn turn_between(a: Vec3, b: Vec3, s: f32) -> Vec3 {
+    let (Some(a), Some(b)) = (a.try_normalize(), b.try_normalize()) else {
+        return b
+            .try_normalize()
+            .or(a.try_normalize())
+            .unwrap_or(Vec3::NEG_Z);
+    };
+    let cross = a.cross(b);
+    let angle = cross.length().atan2(a.dot(b));
+    if angle < 1e-4 {
+        return a.lerp(b, s).try_normalize().unwrap_or(b);
+    }
+    let axis = cross.try_normalize().unwrap_or_else(|| {
+        let up = if a.y.abs() < 0.9 { Vec3::Y } else { Vec3::X };
+        a.cross(up).cross(a).try_normalize().unwrap_or(Vec3::Y)
+    });
+    let turned = glam::Quat::from_axis_angle(axis, angle * s.clamp(0.0, 1.0)) * a;
+    turned.try_normalize().unwrap_or(b)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_view_turns_at_a_steady_rate_even_between_opposite_directions() {
+        let (a, b) = (Vec3::Z, Vec3::NEG_Z);
+        for (s, degrees) in [
+            (0.0f32, 0.0f32),
+            (0.25, 45.0),
+            (0.5, 90.0),
+            (0.75, 135.0),
+            (1.0, 180.0),
+        ] {
+            let d = turn_between(a, b, s);
+            assert!((d.length() - 1.0).abs() < 1e-5);
+            assert!(d.y.abs() < 1e-5, "{d}: turning about the vertical");
+            assert!(
+                (a.angle_between(d).to_degrees() - degrees).abs() < 0.01,
+                "{s}: {d}"
+            );
+        }
+        // A quarter turn: 30° a third of the way.
+        let d = turn_between(Vec3::X, Vec3::Z, 1.0 / 3.0);
+        assert!((Vec3::X.angle_between(d).to_degrees() - 30.0).abs() < 0.01);
+        // Looking straight up and then down turns about X.
+        assert!(turn_between(Vec3::Y, Vec3::NEG_Y, 0.5).y.abs() < 1e-5);
+        assert_eq!(turn_between(Vec3::ZERO, Vec3::X, 0.5), Vec3::X);
+    }
 
     fn path() -> CameraPath {
         CameraPath {
