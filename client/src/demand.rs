@@ -7,9 +7,10 @@
 //! biggest on screen first within each group.
 //!
 //! Demand fetch asks for exactly this list. The oracle and the server's lookahead put it ahead
-//! of their read-ahead ([`ahead_of`]): the server's answer is a round trip old and lists what
-//! its potentially visible sets hold, while this is what the client's own view lacks now, so a
-//! cold start fetches what is in view as soon as demand fetch would.
+//! of their read-ahead ([`ahead_of`], [`crate::deadline::ReadPlan`]): the server's answer is a
+//! round trip old and lists what its potentially visible sets hold, while this is what the
+//! client's own view lacks now, so a cold start fetches what is in view as soon as demand fetch
+//! would; and while the view has objects with nothing to draw, read-ahead waits.
 
 use crate::frame::{Decision, Scene};
 use std::collections::HashSet;

@@ -13,13 +13,15 @@
 //! - [`demand`]: what a frame lacked, most urgent first (§5.2.4): demand fetch's need list and
 //!   the head of every other.
 //! - [`schedule`]: the read schedule of the IO stage (§5.2.3, Ch. 6); [`pacing`]: what it
-//!   keeps in flight on the measured link.
+//!   keeps in flight on the measured link; [`deadline`]: which of the server's items to read
+//!   now and which a later answer can still bring in time.
 //! - [`navigate`]: Funkhouser's mouse-and-keyboard navigation (§3.3.1).
 //! - [`policy`], [`stats`]: prefetch policy specs, per-frame statistics.
 
 pub mod cache;
 pub mod cluster;
 pub mod cost;
+pub mod deadline;
 pub mod demand;
 pub mod elision;
 pub mod frame;

@@ -34,6 +34,7 @@ pub fn parse_policy(spec: &str, base: Policy) -> Result<Policy, String> {
                     "any" => LookaheadCull::Any,
                     "plane" => LookaheadCull::Plane,
                     "frustum" => LookaheadCull::Frustum,
+                    "predicted" => LookaheadCull::Predicted,
                     _ => return Err(bad()),
                 }
             }

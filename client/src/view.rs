@@ -133,12 +133,46 @@ pub fn half_fov_x(fovy: f32, aspect: f32) -> f32 {
     ((fovy * 0.5).tan() * aspect).atan()
 }
 
-/// The observer a client at `eye` looking along `dir` and moving at `velocity` announces to the
+/// How an observer moves: its velocity and how its view direction turns.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Motion {
+    /// Metres per second.
+    pub velocity: Vec3,
+    /// Angular velocity of the view direction: radians per second about the axis it points
+    /// along.
+    pub turn: Vec3,
+}
+
+impl Motion {
+    /// The motion that takes an observer at `eye` looking along `dir` to `next_eye` looking
+    /// along `next_dir` in `dt` seconds (zero for `dt` ≤ 0 or directions that are not
+    /// finite).
+    pub fn between(eye: Vec3, dir: Vec3, next_eye: Vec3, next_dir: Vec3, dt: f32) -> Motion {
+        if dt <= 0.0 || !dt.is_finite() {
+            return Motion::default();
+        }
+        let velocity = (next_eye - eye) / dt;
+        let (a, b) = (dir.normalize_or_zero(), next_dir.normalize_or_zero());
+        let axis = a.cross(b);
+        let angle = axis.length().atan2(a.dot(b));
+        let turn = axis.normalize_or_zero() * (angle / dt);
+        Motion {
+            velocity: if velocity.is_finite() {
+                velocity
+            } else {
+                Vec3::ZERO
+            },
+            turn: if turn.is_finite() { turn } else { Vec3::ZERO },
+        }
+    }
+}
+
+/// The observer a client at `eye` looking along `dir` and moving with `motion` announces to the
 /// server, with its field of view (`fovy` high at `aspect`) and its speed limits.
 pub fn observer(
     eye: Vec3,
     dir: Vec3,
-    velocity: Vec3,
+    motion: Motion,
     fovy: f32,
     aspect: f32,
     max_speed: f32,
@@ -148,11 +182,12 @@ pub fn observer(
         eye: eye.into(),
         dir: dir.into(),
         up: [0.0, 1.0, 0.0],
-        velocity: velocity.into(),
+        velocity: motion.velocity.into(),
         half_fov_x: half_fov_x(fovy, aspect),
         half_fov_y: fovy * 0.5,
         max_speed,
         max_turn,
+        turn: motion.turn.into(),
     }
 }
 

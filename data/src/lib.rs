@@ -17,6 +17,7 @@ pub mod build;
 pub mod bulk;
 pub mod cells;
 pub mod codec;
+pub mod deadline;
 pub mod error;
 pub mod format;
 pub mod geometry;

@@ -677,6 +677,7 @@ fn the_nearest_point_of_the_range_sets_each_objects_lod_cap() {
         half_fov_y: 0.45,
         max_speed: 2.0,
         max_turn: 1.0,
+        turn: [0.0; 3],
     };
     let range = ObserverRange::new(&obs, &policy);
     // 2 m/s for 20 frames of 50 ms: the observer may come 2 m closer.

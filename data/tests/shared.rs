@@ -37,6 +37,7 @@ fn observer(eye: Vec3, dir: Vec3, max_turn: f32) -> Observer {
         half_fov_y: 0.45,
         max_speed: 1.5,
         max_turn,
+        turn: [0.0; 3],
     }
 }
 

@@ -13,7 +13,7 @@ pub use messages::*;
 use serde::{Serialize, de::DeserializeOwned};
 
 /// Version of the wire types in this crate.
-pub const PROTOCOL_VERSION: u32 = 2;
+pub const PROTOCOL_VERSION: u32 = 3;
 
 /// `Content-Type` of bincode bodies.
 pub const BINCODE_MIME: &str = "application/x-portico-bincode";
@@ -136,6 +136,7 @@ mod tests {
                 half_fov_y: 0.45,
                 max_speed: 2.0,
                 max_turn: 1.5,
+                turn: [0.0; 3],
             },
             policy: Policy::default(),
             held: encode_held([5, 9]),

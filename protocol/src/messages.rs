@@ -88,6 +88,11 @@ pub struct Observer {
     pub max_speed: f32,
     /// Maximum rotational speed v_r (radians per second).
     pub max_turn: f32,
+    /// How the view direction turns now: the angular velocity (radians per second about the
+    /// axis it points along; zero when not turning). The predicted lookahead turns the view by
+    /// it ([`LookaheadCull::Predicted`]); JSON may leave it out.
+    #[serde(default)]
+    pub turn: [f32; 3],
 }
 
 /// Which observer-range cells to keep (Funkhouser §5.2.2, the range cull algorithm).
@@ -114,6 +119,10 @@ pub enum LookaheadCull {
     Plane,
     /// Visible cells at least partly inside the (widened) observer frustum.
     Frustum,
+    /// Not the range cells' visibility but what is seen, looking all around, from the eye and
+    /// from where its velocity takes it within the lookahead depth (eye-to-object visibility,
+    /// §4.1.2, at predicted eye positions; `portico_data::prefetch::predicted`).
+    Predicted,
 }
 
 /// Whether a visible cell contributes the objects visible from the range cell or all of its
@@ -159,7 +168,7 @@ impl Default for Policy {
             depth_frames: 16,
             frame_time_s: 0.05,
             range_cull: RangeCull::Direction,
-            lookahead_cull: LookaheadCull::Any,
+            lookahead_cull: LookaheadCull::Predicted,
             granularity: Granularity::Object,
             size_threshold_px: 16.0,
             screen: [640, 480],
@@ -245,14 +254,26 @@ pub enum StreamClient {
         version: u32,
         /// Prefetch policy.
         policy: Policy,
-        /// Bytes per second the client wants at most (the server may cap it lower).
+        /// Bytes per second the client wants at most (the server may cap it lower); the
+        /// session's pushes are paced to it and its deadlines counted at it.
         rate_bytes_per_s: u64,
+        /// The client's round trip to the server in milliseconds, as it measured it (the
+        /// WebSocket handshake), for the push deadlines; 0: not known (counted as none).
+        rtt_ms: u32,
     },
     /// This frame's observer.
     Observer(Observer),
     /// Segments the client dropped from its cache (the server's mirror forgets them).
     Evicted(Vec<u32>),
+    /// What the client's latest frame lacked, most urgent first (what it had nothing to draw
+    /// for, then what it drew coarser: `portico_client::demand`): pushed ahead of the need
+    /// list, which the server made for an observer that may have moved on or mispredicted.
+    /// Replaces the previous one; empty clears it. At most [`MAX_LACKING`] ids.
+    Lacking(Vec<u32>),
 }
+
+/// Most segment ids in one [`StreamClient::Lacking`].
+pub const MAX_LACKING: usize = 4096;
 
 /// Server → client control messages on `/v1/stream`. Segment bytes do not go through this
 /// type: they travel as [`segment_frame`]s so the payload is not re-encoded.

@@ -400,7 +400,7 @@ pub fn validate(req: &PrefetchRequest, segments: usize) -> Result<HashSet<u32>, 
 
 /// An observer's numbers are finite, its angles and speeds not negative.
 pub fn validate_observer(o: &portico_protocol::Observer) -> Result<(), Error> {
-    let floats = o.eye.iter().chain(&o.dir).chain(&o.up).chain(&o.velocity);
+    let floats = (o.eye.iter().chain(&o.dir).chain(&o.up)).chain(o.velocity.iter().chain(&o.turn));
     let scalars = [o.half_fov_x, o.half_fov_y, o.max_speed, o.max_turn];
     if floats.chain(&scalars).any(|x| !x.is_finite()) || scalars.iter().any(|&x| x < 0.0) {
         return Err(Error::bad_request(

@@ -4,7 +4,15 @@
 //! which queued items it dropped because their need vanished; and forgets segments the client
 //! reports evicted. No round trip per frame is needed.
 //!
-//! Answers are shared and incremental: the need list depends only on the eye cell and a
+//! Under the predicted lookahead (the default policy) every observer gets its own need list,
+//! since what it will see depends on its velocity and turn, and the session pushes an item
+//! only when leaving it to the next observer's list would make it late
+//! ([`portico_data::deadline`]): the lead is the list's age (counted from when the client sent
+//! the observer, half its round trip before it arrived), a frame until the next observer, the
+//! round trip and the margin, and what is queued is the push clock's backlog at the session's
+//! rate. What is not due yet stays in the list for the next push, or for the next list.
+//!
+//! Under Funkhouser's range lookahead answers are shared and incremental: the need list depends only on the eye cell and a
 //! direction bucket (`portico_data::prefetch::shared`), so an observer that stays in its cell
 //! and bucket costs a k-D descent and nothing else, a new place whose list some session already
 //! computed costs a cache lookup, and only a new place nobody has asked for is computed. What
@@ -25,10 +33,12 @@ use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use futures_util::{SinkExt, StreamExt};
+use portico_data::deadline::{MARGIN_FRAMES, cannot_wait};
 use portico_data::prefetch::NeedList;
 use portico_data::prefetch::shared::{ShareKey, SharePlace, encode_policy};
 use portico_protocol::{
-    FRAME_CONTROL, Observer, PROTOCOL_VERSION, Policy, StreamClient, StreamServer, segment_frame,
+    FRAME_CONTROL, LookaheadCull, MAX_LACKING, Observer, PROTOCOL_VERSION, Policy, StreamClient,
+    StreamServer, segment_frame,
 };
 use std::collections::HashSet;
 use std::future::Future;
@@ -36,6 +46,9 @@ use std::pin::Pin;
 use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
 use tokio::time::{Duration, Instant, sleep, sleep_until};
+
+/// How far behind the pacing clock may fall before the time is lost (a push burst's length).
+const PACING_BURST: Duration = Duration::from_millis(10);
 
 /// Upgrades to a session if a session slot is free (else 503).
 pub async fn upgrade(State(s): State<Arc<AppState>>, ws: WebSocketUpgrade) -> Response {
@@ -72,6 +85,8 @@ struct Pending {
     place: Option<SharePlace>,
     /// When the oldest observer it replaced arrived (latency counts from there).
     arrived: Instant,
+    /// When this observer arrived (its list's deadlines count from there).
+    at: Instant,
     /// Observers it stands for (it and those it replaced).
     updates: u64,
     /// The session's policy generation when it arrived.
@@ -85,20 +100,29 @@ struct Session {
     /// The policy's bytes, the shared lists' key part that stays for the session.
     policy_bytes: Arc<[u8]>,
     rate: u64,
+    /// The client's round trip (seconds) as it reported it in Hello.
+    rtt_s: f64,
     /// Segments the client holds (sent and not evicted).
     mirror: HashSet<u32>,
     /// The need list being pushed.
     list: Arc<NeedList>,
     /// Items of `list` before this are pushed, held or skipped.
     cursor: usize,
+    /// What the client's latest frame lacked, pushed first; and how far it has been pushed.
+    lacking: Vec<u32>,
+    lacking_at: usize,
     /// The place `list` was made for (`None`: for one observer, or nothing yet).
     place: Option<SharePlace>,
     /// The place of the latest observer: a list computed for another is stale on arrival.
     want: Option<SharePlace>,
     /// Bumped when Hello changes the policy: lists computed under an older one are stale.
     generation: u64,
+    /// When the observer of `list` arrived.
+    observed: Instant,
     /// When the paced link is free for the next push.
     next_free: Instant,
+    /// With deadlines, when to look for a due item again (nothing in the list was due).
+    recheck: Instant,
     /// The latest observer not yet served (older ones are dropped: only the latest matters).
     pending: Option<Pending>,
 }
@@ -112,13 +136,18 @@ impl Session {
             policy_bytes: encode_policy(&policy),
             policy,
             rate,
+            rtt_s: 0.0,
             mirror: HashSet::new(),
             list: Arc::new(NeedList::default()),
             cursor: 0,
+            lacking: Vec::new(),
+            lacking_at: 0,
             place: None,
             want: None,
             generation: 0,
+            observed: Instant::now(),
             next_free: Instant::now(),
+            recheck: Instant::now(),
             pending: None,
         }
     }
@@ -139,7 +168,9 @@ impl Session {
             {
                 computing = Some((self.compute(p.obs, p.place), p));
             }
-            let push_at = (self.cursor < self.list.items.len()).then_some(self.next_free);
+            let pending =
+                self.cursor < self.list.items.len() || self.lacking_at < self.lacking.len();
+            let push_at = pending.then_some(self.next_free.max(self.recheck));
             let outgoing = tokio::select! {
                 msg = rx.next() => {
                     let Some(Ok(msg)) = msg else { break };
@@ -213,6 +244,7 @@ impl Session {
             Ok(StreamClient::Hello {
                 policy,
                 rate_bytes_per_s,
+                rtt_ms,
                 ..
             }) => {
                 if let Err(e) = crate::routes::validate_policy(&policy) {
@@ -228,6 +260,7 @@ impl Session {
                     }
                 }
                 self.rate = rate_bytes_per_s.clamp(1, self.state.config.max_session_rate);
+                self.rtt_s = f64::from(rtt_ms.min(10_000)) / 1e3;
                 Ok(None)
             }
             Ok(StreamClient::Observer(obs)) => {
@@ -244,7 +277,26 @@ impl Session {
                 }
                 if needed {
                     self.cursor = 0; // push them again, in their place in the order
+                    self.recheck = Instant::now();
                 }
+                Ok(None)
+            }
+            Ok(StreamClient::Lacking(ids)) => {
+                let n = self.state.db().segments().len();
+                if ids.len() > MAX_LACKING {
+                    return error(Error::bad_request(format!(
+                        "Lacking: {} ids, at most {MAX_LACKING}",
+                        ids.len()
+                    )));
+                }
+                if let Some(bad) = ids.iter().find(|&&id| id as usize >= n) {
+                    return error(Error::bad_request(format!(
+                        "Lacking: segment {bad} does not exist (the database has {n})"
+                    )));
+                }
+                self.lacking = ids;
+                self.lacking_at = 0;
+                self.recheck = Instant::now();
                 Ok(None)
             }
             Err(e) => error(Error::bad_request(format!("message does not decode: {e}"))),
@@ -257,7 +309,9 @@ impl Session {
         let arrived = Instant::now();
         let m = &self.state.metrics;
         m.stream_updates.fetch_add(1, Relaxed);
-        let place = if self.state.config.shared_answers {
+        // A predicted lookahead depends on the observer's motion: no two observers share it.
+        let shared = self.state.config.shared_answers && !self.deadlines();
+        let place = if shared {
             self.state.prefetcher.share_place(&obs)
         } else {
             None
@@ -276,13 +330,14 @@ impl Session {
             let key = ShareKey::new(p, self.policy_bytes.clone());
             if let Some(list) = self.state.prefetcher.shared_cached(&key) {
                 m.update(arrived.elapsed().as_secs_f64(), updates);
-                return self.take_list(list, place);
+                return self.take_list(list, place, arrived);
             }
         }
         self.pending = Some(Pending {
             obs,
             place,
             arrived,
+            at: Instant::now(),
             updates,
             generation: self.generation,
         });
@@ -298,17 +353,27 @@ impl Session {
         let stale = p.generation != self.generation || (p.place.is_some() && p.place != self.want);
         match list {
             Ok(_) if stale => None,
-            Ok(l) => self.take_list(l, p.place),
+            Ok(l) => self.take_list(l, p.place, p.at),
             Err(e) if e.status() == StatusCode::SERVICE_UNAVAILABLE => None,
             Err(e) => Some(control(&StreamServer::Error(e.to_api()))),
         }
     }
 
     /// Puts a need list in place; reports queued items whose need vanished.
-    fn take_list(&mut self, list: Arc<NeedList>, place: Option<SharePlace>) -> Option<Message> {
+    fn take_list(
+        &mut self,
+        list: Arc<NeedList>,
+        place: Option<SharePlace>,
+        observed: Instant,
+    ) -> Option<Message> {
         let m = &self.state.metrics;
         m.prefetch_answers.fetch_add(1, Relaxed);
-        let end = self.list.fit.max(self.cursor).min(self.list.items.len());
+        // With deadlines nothing past the push in flight is queued: nothing to report.
+        let end = if self.deadlines() {
+            0
+        } else {
+            self.list.fit.max(self.cursor).min(self.list.items.len())
+        };
         let dropped: Vec<u32> = self.list.items[self.cursor.min(end)..end]
             .iter()
             .map(|i| i.segment)
@@ -317,6 +382,8 @@ impl Session {
         self.list = list;
         self.cursor = 0;
         self.place = place;
+        self.observed = observed;
+        self.recheck = Instant::now();
         if dropped.is_empty() {
             return None;
         }
@@ -327,25 +394,68 @@ impl Session {
     /// The next segment of the list the client lacks, as a frame (or an error for a segment
     /// that cannot be read), and the pacing clock advanced by its size.
     fn next_push(&mut self) -> Option<Message> {
-        let item = loop {
-            let i = self.cursor;
-            let item = *self.list.items.get(i)?;
-            self.cursor += 1;
-            // Past what the client's cache holds only the mandatory items go.
-            let wanted = i < self.list.fit || self.list.must[i];
-            if wanted && !self.mirror.contains(&item.segment) {
-                break item;
-            }
-        };
-        let bytes = match self.state.db().segment(item.segment) {
+        let segment = self.next_due(Instant::now())?;
+        let bytes = match self.state.db().segment(segment) {
             Ok(b) => b,
             Err(e) => return Some(control(&StreamServer::Error(Error::from(e).to_api()))),
         };
         self.state.metrics.sent(bytes.len() as u64);
-        self.mirror.insert(item.segment);
+        self.mirror.insert(segment);
         let cost = Duration::from_secs_f64(bytes.len() as f64 / self.rate as f64);
-        self.next_free = self.next_free.max(Instant::now()) + cost;
-        Some(Message::Binary(segment_frame(item.segment, &bytes).into()))
+        // A token bucket PACING_BURST deep: a timer that wakes late (they tick in whole
+        // milliseconds, longer than a small segment takes at a few MB/s) lets the next pushes
+        // go at once rather than losing the time, which halved the rate on small segments.
+        let now = Instant::now();
+        let floor = now.checked_sub(PACING_BURST).unwrap_or(now);
+        self.next_free = self.next_free.max(floor) + cost;
+        Some(Message::Binary(segment_frame(segment, &bytes).into()))
+    }
+}
+
+impl Session {
+    /// Whether the session's pushes wait for their deadlines (the predicted lookahead).
+    fn deadlines(&self) -> bool {
+        self.policy.lookahead_cull == LookaheadCull::Predicted
+    }
+
+    /// The segment to push next: what the client's frame lacked and it does not hold, first;
+    /// then the first item past the cursor that the client lacks, is wanted (past what the
+    /// client's cache holds only the mandatory items are) and, with deadlines, cannot wait for
+    /// the next list; the cursor moves past every item settled before it. `None`: nothing to
+    /// push now (and `recheck` says when to look again).
+    fn next_due(&mut self, now: Instant) -> Option<u32> {
+        while let Some(&id) = self.lacking.get(self.lacking_at) {
+            self.lacking_at += 1;
+            if !self.mirror.contains(&id) {
+                return Some(id);
+            }
+        }
+        let dt = f64::from(self.policy.frame_time_s).max(1e-3);
+        let lead = self.deadlines().then(|| {
+            let age = now.saturating_duration_since(self.observed).as_secs_f64() + self.rtt_s / 2.0;
+            age + dt + self.rtt_s + MARGIN_FRAMES * dt
+        });
+        let rate = self.rate as f64;
+        let queued = self.next_free.saturating_duration_since(now).as_secs_f64() * rate;
+        let mut settled = true;
+        for i in self.cursor..self.list.items.len() {
+            let item = self.list.items[i];
+            let wanted = i < self.list.fit || self.list.must[i];
+            let due = lead
+                .is_none_or(|l| cannot_wait(item.frames, dt, l, queued, item.bytes as f64, rate));
+            if !wanted || self.mirror.contains(&item.segment) || due {
+                if settled {
+                    self.cursor = i + 1;
+                }
+                if wanted && due && !self.mirror.contains(&item.segment) {
+                    return Some(item.segment);
+                }
+                continue;
+            }
+            settled = false;
+        }
+        self.recheck = now + Duration::from_secs_f64(dt / 2.0);
+        None
     }
 }
 

@@ -419,6 +419,7 @@ async fn the_stream_pushes_needed_segments_and_survives_vanishing_clients() {
         version: PROTOCOL_VERSION,
         policy: req.policy,
         rate_bytes_per_s: 100 << 20,
+        rtt_ms: 0,
     }))
     .await
     .unwrap();

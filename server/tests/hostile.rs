@@ -109,6 +109,7 @@ fn hello() -> StreamClient {
             ..Policy::default()
         },
         rate_bytes_per_s: u64::MAX,
+        rtt_ms: 0,
     }
 }
 

@@ -2,12 +2,15 @@
 //! rate, nothing the client holds is sent again (and an `Evicted` segment is), queued segments a
 //! new observer no longer needs are reported `Dropped` and never sent, an observer that stays in
 //! its cell and direction bucket costs no computation, and a silent client is closed after the
-//! idle timeout with a Close frame.
+//! idle timeout with a Close frame. Those use Funkhouser's range lookahead, whose lists sessions
+//! share; under the predicted lookahead (the default) a session pushes an item only once a
+//! later list could not bring it in time.
 
 use futures_util::{SinkExt, StreamExt};
 use portico_data::prefetch::{Budget, NeedList};
 use portico_protocol::{
-    Observer, PROTOCOL_VERSION, Policy, ServerFrame, StreamClient, StreamServer,
+    LookaheadCull, Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, ServerFrame, StreamClient,
+    StreamServer,
 };
 use portico_server::Config;
 use portico_server::state::AppState;
@@ -17,7 +20,15 @@ use std::time::{Duration, Instant};
 use tokio_tungstenite::tungstenite::Message;
 
 mod common;
-use common::{request, start};
+use common::start;
+
+/// A request under Funkhouser's range lookahead (every visible cell), whose need lists the
+/// sessions share.
+fn request(db: &portico_data::Database) -> PrefetchRequest {
+    let mut r = common::request(db);
+    r.policy.lookahead_cull = LookaheadCull::Any;
+    r
+}
 
 type Ws =
     tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
@@ -36,6 +47,7 @@ async fn hello(ws: &mut Ws, policy: Policy, rate: u64) {
         version: PROTOCOL_VERSION,
         policy,
         rate_bytes_per_s: rate,
+        rtt_ms: 0,
     };
     ws.send(binary(&msg)).await.unwrap();
 }
@@ -100,9 +112,10 @@ async fn pushes_are_paced_to_the_sessions_byte_rate() {
     let answer = need_list(&s.state, &req.observer, &req.policy);
     let total: u64 = answer.items.iter().map(|i| i.bytes).sum();
     assert!(total > 50_000, "too little to pace: {total} bytes");
-    // A rate that takes 0.6 s for the whole answer, and one that is not a limit.
+    // A rate that takes 1.2 s for the whole answer, and one that is not a limit.
+    let rate = total * 10 / 12;
     let mut elapsed = Vec::new();
-    for rate in [total * 10 / 6, 1 << 30] {
+    for rate in [rate, 1 << 30] {
         let mut ws = connect(&s.base).await;
         hello(&mut ws, req.policy, rate).await;
         let t = Instant::now();
@@ -114,11 +127,12 @@ async fn pushes_are_paced_to_the_sessions_byte_rate() {
         let sent: u64 = got.iter().map(|&(_, n)| n as u64).sum();
         assert_eq!(sent, total);
     }
-    // The first push goes at once; the rest wait for the link: (total - first) / rate.
-    let first = answer.items[0].bytes as f64;
-    let paced_floor = (total as f64 - first) / (total as f64 * 10.0 / 6.0);
+    // The first push goes at once and the last waits for all before it, less the pacing
+    // bucket's 10 ms burst: at least (total - the largest item) / rate - 10 ms.
+    let largest = answer.items.iter().map(|i| i.bytes).max().unwrap() as f64;
+    let paced_floor = (total as f64 - largest) / rate as f64 - 0.010;
     assert!(
-        elapsed[0] >= paced_floor * 0.95,
+        elapsed[0] >= paced_floor,
         "paced: {:.3} s, at least {paced_floor:.3} s expected",
         elapsed[0]
     );
@@ -343,4 +357,103 @@ async fn a_session_pushes_no_more_than_the_clients_cache_holds_but_all_it_must()
     assert_eq!(got, want);
     let quiet = next(&mut ws, Duration::from_millis(400)).await;
     assert!(quiet.is_none(), "pushed past the cache: {quiet:?}");
+}
+
+/// Deadline-ordered push (`portico_data::deadline`): with the predicted lookahead a session
+/// pushes what the observer needs now at once, and an item needed `frames` ahead only when the
+/// list has aged enough that the next one could not bring it in time; in the end, all of it.
+#[tokio::test]
+async fn a_predicted_session_pushes_each_item_when_it_cannot_wait_for_the_next_list() {
+    let s = start(Config::default()).await;
+    let mut req = common::request(s.state.db());
+    assert_eq!(req.policy.lookahead_cull, LookaheadCull::Predicted);
+    req.observer.velocity = [1.5, 0.0, 0.0];
+    let list = s
+        .state
+        .prefetcher
+        .need_list_within(&req.observer, &req.policy, &Budget::unlimited())
+        .unwrap();
+    let frames: std::collections::HashMap<u32, u32> =
+        list.items.iter().map(|i| (i.segment, i.frames)).collect();
+    let late = list.items.iter().filter(|i| i.frames >= 8).count();
+    let now = list.items.iter().filter(|i| i.frames == 0).count();
+    assert!(
+        late > 0 && now > 0,
+        "{now} items now, {late} 8 frames ahead or more"
+    );
+    let want: HashSet<u32> = (0..list.items.len())
+        .filter(|&i| i < list.fit || list.must[i])
+        .map(|i| list.items[i].segment)
+        .collect();
+
+    let mut ws = connect(&s.base).await;
+    hello(&mut ws, req.policy, 1 << 30).await;
+    let t0 = Instant::now();
+    ws.send(binary(&StreamClient::Observer(req.observer)))
+        .await
+        .unwrap();
+    let dt = f64::from(req.policy.frame_time_s);
+    let mut got = HashSet::new();
+    while got.len() < want.len() {
+        match next(&mut ws, Duration::from_secs(10)).await {
+            Some(Got::Segment(id, _)) => {
+                // Due when 3 frames (the next list, the margin) plus the list's age reach it;
+                // a frame of slack for the scheduler.
+                let age = t0.elapsed().as_secs_f64() / dt;
+                let f = *frames
+                    .get(&id)
+                    .unwrap_or_else(|| panic!("segment {id} is not in the observer's own list"));
+                assert!(
+                    f64::from(f) <= 4.0 + age,
+                    "segment {id}, needed {f} frames ahead, pushed after {age:.1} frames"
+                );
+                got.insert(id);
+            }
+            other => panic!("{other:?} after {} of {} segments", got.len(), want.len()),
+        }
+    }
+    assert_eq!(got, want);
+    let quiet = next(&mut ws, Duration::from_millis(300)).await;
+    assert!(quiet.is_none(), "pushed past the list: {quiet:?}");
+}
+
+/// What the client's frame lacked (`Lacking`) goes ahead of the need list, and a `Lacking`
+/// naming a segment the database does not have is refused, naming it, while the session goes
+/// on.
+#[tokio::test]
+async fn what_the_frame_lacked_is_pushed_first_and_a_bad_id_is_refused() {
+    let s = start(Config::default()).await;
+    let req = common::request(s.state.db());
+    let list = s
+        .state
+        .prefetcher
+        .need_list_within(&req.observer, &req.policy, &Budget::unlimited())
+        .unwrap();
+    let n = s.state.db().segments().len() as u32;
+    // Two segments the list does not name: nothing but Lacking can bring them.
+    let extra: Vec<u32> = (0..n)
+        .rev()
+        .filter(|id| !list.segments.contains(id))
+        .take(2)
+        .collect();
+    assert_eq!(extra.len(), 2);
+    let mut ws = connect(&s.base).await;
+    hello(&mut ws, req.policy, 1 << 30).await;
+    ws.send(binary(&StreamClient::Lacking(vec![n + 7])))
+        .await
+        .unwrap();
+    match next(&mut ws, Duration::from_secs(5)).await {
+        Some(Got::Error(e)) => assert!(e.contains(&format!("segment {}", n + 7)), "{e}"),
+        other => panic!("expected an error, got {other:?}"),
+    }
+    ws.send(binary(&StreamClient::Lacking(extra.clone())))
+        .await
+        .unwrap();
+    ws.send(binary(&StreamClient::Observer(req.observer)))
+        .await
+        .unwrap();
+    let got = segments(&mut ws, 3).await;
+    let first: Vec<u32> = got.iter().take(2).map(|&(id, _)| id).collect();
+    assert_eq!(first, extra, "what the frame lacked comes first");
+    assert!(list.segments.contains(&got[2].0), "then the list: {got:?}");
 }

@@ -108,6 +108,7 @@ impl Prefetcher {
                     claimed += self.add_object(
                         o,
                         frames,
+                        None,
                         range,
                         half_fov_y,
                         policy,
@@ -196,6 +197,7 @@ impl Prefetcher {
             claimed += self.add_object(
                 o,
                 frames,
+                None,
                 range,
                 obs.half_fov_y,
                 policy,
@@ -206,17 +208,20 @@ impl Prefetcher {
         Ok(cands)
     }
 
-    /// Adds the LODs of one object from the coarsest up to its maximum; returns the bytes they
-    /// will occupy in the client's cache (decoded: a compressed segment claims its plain size).
+    /// Adds the LODs of one object from the coarsest up to its maximum, the finest the size
+    /// threshold allows at `nearest` metres (default: the nearest point of `range`); returns
+    /// the bytes they will occupy in the client's cache (decoded: a compressed segment claims
+    /// its plain size).
     /// A textured object's coarse texture segment comes right after its coarsest LOD with
     /// texture coordinates, and the segment of the finest mip useful at the nearest point of
     /// the range ([`crate::texture::TextureRecord::useful_segment`]) right after its finest;
     /// texture bytes are claimed once per segment (`claimed_mips`).
     #[allow(clippy::too_many_arguments)]
-    fn add_object(
+    pub(super) fn add_object(
         &self,
         o: u32,
         frames: u32,
+        nearest: Option<f32>,
         range: &ObserverRange,
         half_fov_y: f32,
         policy: &Policy,
@@ -228,10 +233,12 @@ impl Prefetcher {
             return 0;
         };
         let lods = header.lods_of(inst);
-        let max = max_lod_in_range(lods, &inst.bounds, range, policy, half_fov_y);
+        let nearest = nearest
+            .unwrap_or_else(|| (distance_to_box(range.eye, &inst.bounds) - range.radius).max(0.0));
+        let px = projected_pixels(&inst.bounds, nearest, policy, half_fov_y);
+        let max = max_lod(lods, px, policy.size_threshold_px.max(0.0));
         let texture = header.texture_of(inst).map(|t| {
-            let nearest = (distance_to_box(range.eye, &inst.bounds) - range.radius).max(0.0);
-            let px = projected_pixels(&inst.bounds, nearest, policy, half_fov_y).sqrt();
+            let px = px.sqrt();
             let span = header
                 .objects
                 .get(inst.object as usize)

@@ -3,6 +3,7 @@
 //!
 //! - [`range`]: the observer range and the range cells (§5.2.1, Dijkstra in frames-to-enter).
 //! - [`lookahead`]: the lookahead objects and each one's maximum LOD (§5.2.2).
+//! - [`predicted`]: the lookahead as what is seen from the eye's predicted positions.
 //! - [`shared`]: one need list for every observer in a cell looking the same way, cached.
 //! - this module: the read set — stab lists of the range cells first, then the geometry of what
 //!   the observer sees right now, then the rest, each ordered by LOD (coarsest first) and by
@@ -13,6 +14,7 @@
 //! the load tester's oracle and baselines call it directly.
 
 pub mod lookahead;
+pub mod predicted;
 pub mod range;
 pub mod shared;
 
@@ -21,7 +23,9 @@ use crate::cells::{CellGraph, StabList};
 use crate::error::Result;
 use crate::format::SegmentKind;
 use crate::geometry::Aabb;
-use portico_protocol::{NeedItem, NeedKind, Observer, PROTOCOL_VERSION, Policy, PrefetchResponse};
+use portico_protocol::{
+    LookaheadCull, NeedItem, NeedKind, Observer, PROTOCOL_VERSION, Policy, PrefetchResponse,
+};
 use range::ObserverRange;
 use std::collections::HashSet;
 use std::sync::{Arc, OnceLock};
@@ -199,7 +203,18 @@ impl Prefetcher {
         let (ranged, stab_items, cands, lookahead_cells) = match &self.graph {
             Some(g) => {
                 let now = self.visible_now(g, obs)?;
-                self.lookahead_with_cells(g, &range, &now, obs.half_fov_y, policy, budget)?
+                let predicted = match policy.lookahead_cull {
+                    LookaheadCull::Predicted => {
+                        self.lookahead_predicted(g, &range, &now, obs, policy, budget)?
+                    }
+                    _ => None,
+                };
+                match predicted {
+                    Some(p) => p,
+                    None => {
+                        self.lookahead_with_cells(g, &range, &now, obs.half_fov_y, policy, budget)?
+                    }
+                }
             }
             None => (
                 1,

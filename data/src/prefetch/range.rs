@@ -211,6 +211,9 @@ impl ObserverRange {
             LookaheadCull::Any => true,
             LookaheadCull::Plane => self.in_front(region),
             LookaheadCull::Frustum => self.in_frustum(region),
+            // The predicted lookahead does not cull range cells' visibility; where it falls
+            // back to it, it keeps everything.
+            LookaheadCull::Predicted => true,
         }
     }
 }

@@ -16,6 +16,7 @@ fn observer(dir: [f32; 3], max_speed: f32, half_fov: f32) -> Observer {
         half_fov_y: half_fov,
         max_speed,
         max_turn: 0.0,
+        turn: [0.0; 3],
     }
 }
 

@@ -62,6 +62,7 @@ pub fn observer(eye: glam::Vec3, dir: [f32; 3]) -> portico_protocol::Observer {
         half_fov_y: 0.45,
         max_speed: 1.5,
         max_turn: 1.0,
+        turn: [0.0; 3],
     }
 }
 

@@ -101,6 +101,7 @@ pub fn observer(db: &Database) -> Observer {
         half_fov_y: 0.45,
         max_speed: 1.5,
         max_turn: 1.0,
+        turn: [0.0; 3],
     }
 }
 
