@@ -5,10 +5,12 @@
 //! or HTTP through an emulated link) and where the need list comes from:
 //! - from the server: each published frame state becomes a `POST /v1/prefetch` (one at a time;
 //!   a newer state waits for the answer in flight), and the answer's items become the list,
-//!   behind what the latest frame lacked ([`Ask::lacking`], fetched as demand fetch would);
+//!   behind what the latest frame lacked ([`Ask::lacking`], fetched as demand fetch would;
+//!   alone while the frame has objects with nothing to draw), the answer's items only when a
+//!   later answer could not bring them in time ([`ReadPlan`]);
 //! - from the client itself ([`Ask::wants`]): demand fetch and the oracle of the load tester.
 
-use portico_client::demand::ahead_of;
+use portico_client::deadline::{Link, ReadPlan};
 use portico_client::pacing::LinkMeter;
 use portico_client::schedule::Schedule;
 use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
@@ -34,6 +36,9 @@ pub struct Ask {
     /// `wants` `None`, read ahead of the server's latest answer, which is a round trip old and
     /// may not have come yet (a cold start).
     pub lacking: Vec<u32>,
+    /// The frame skipped objects (something in view had nothing to draw): read only what it
+    /// lacked until it is whole ([`portico_client::deadline::ReadPlan`]).
+    pub incomplete: bool,
     /// When the frame loop published this.
     pub at: Instant,
 }
@@ -52,7 +57,8 @@ pub enum Event<B> {
         body: B,
         /// Bytes on the wire.
         bytes: u64,
-        /// When a need list first asked for it.
+        /// When a need list first asked for it (pushed: when the latest observer before it
+        /// came was sent, so its latency is a lower bound).
         listed_at: Instant,
     },
     /// A request failed (the walk goes on; a later list may ask again).
@@ -78,6 +84,24 @@ pub trait Fetcher: Clone + Send + Sync + 'static {
         &self,
         ids: Vec<u32>,
     ) -> impl Future<Output = anyhow::Result<Items<Self::Body>>> + Send + 'static;
+    /// Checks and decodes one segment as it came over the wire (a pushed one; `batch` does the
+    /// same for each of its own).
+    fn decode(&self, id: u32, bytes: &[u8]) -> anyhow::Result<Self::Body>;
+    /// The push transport's address ([`crate::net::Remote::stream_url`]); by default there is
+    /// none (`Err`).
+    fn stream_url(&self) -> anyhow::Result<String> {
+        anyhow::bail!("no push transport")
+    }
+    /// When a message sent now reaches the server: now, but later across an emulated link.
+    fn reaches_server(&self) -> Instant {
+        Instant::now()
+    }
+    /// When a pushed frame of `bytes` that came off the socket now is the client's: now, but
+    /// later across an emulated link (its rate, then half its round trip).
+    fn reaches_client(&self, bytes: u64) -> Instant {
+        let _ = bytes;
+        Instant::now()
+    }
     /// A segment's size in bytes on the wire (from the manifest), to size the batches.
     fn bytes(&self, id: u32) -> u64;
     /// What a segment occupies once decoded (more than [`Fetcher::bytes`] for a compressed
@@ -97,6 +121,20 @@ pub async fn drive<F: Fetcher>(
     policy: Policy,
     parallel: usize,
     window: u64,
+    state: watch::Receiver<Option<Ask>>,
+    tx: mpsc::Sender<Event<F::Body>>,
+) {
+    drive_after(0, fetcher, policy, parallel, window, state, tx).await
+}
+
+/// [`drive`], after `events` already sent on `tx` by another transport (they count in what
+/// the frame loop reports it has taken).
+pub(crate) async fn drive_after<F: Fetcher>(
+    events: u64,
+    fetcher: F,
+    policy: Policy,
+    parallel: usize,
+    window: u64,
     mut state: watch::Receiver<Option<Ask>>,
     tx: mpsc::Sender<Event<F::Body>>,
 ) {
@@ -105,16 +143,16 @@ pub async fn drive<F: Fetcher>(
     // list's urgent segments never queue behind more read-ahead than that ([`LinkMeter`]).
     let mut meter = LinkMeter::default();
     let horizon_s = 2.0 * f64::from(policy.frame_time_s);
-    let mut seq = 0u64;
+    let mut seq = events;
     let mut fetches: JoinSet<Fetched<F::Body>> = JoinSet::new();
     // What each read request in flight asked for (a task that panics must not strand them),
     // and when it was sent.
     let mut batches: HashMap<tokio::task::Id, (Vec<u32>, Instant)> = HashMap::new();
     let mut asking: Option<JoinHandle<Answered>> = None;
-    // The server's latest need list, and what the latest frame lacked: read in that order,
-    // the frame's first.
-    let mut answer: Vec<u32> = Vec::new();
-    let mut lacking: Vec<u32> = Vec::new();
+    // The server's latest need list and what the latest frame lacked: read the frame's first,
+    // then what of the answer cannot wait for the next one ([`ReadPlan`]).
+    let mut plan = ReadPlan::default();
+    let dt = f64::from(policy.frame_time_s);
     // A frame state the server has not yet been asked about.
     let mut unasked: Option<Ask> = None;
     loop {
@@ -150,10 +188,9 @@ pub async fn drive<F: Fetcher>(
                 match ask.wants {
                     Some(ref wants) => s.refresh(wants.clone(), ask.at),
                     None => {
-                        if ask.lacking != lacking {
-                            lacking = ask.lacking.clone();
-                            s.refresh(ahead_of(&lacking, answer.iter().copied()), ask.at);
-                        }
+                        // Every frame: deadlines come nearer as the answer ages.
+                        plan.frame(ask.lacking.clone(), ask.incomplete);
+                        s.refresh(plan.list(Instant::now(), dt, link(&meter, &s)), ask.at);
                         unasked = Some(ask);
                     }
                 }
@@ -164,8 +201,8 @@ pub async fn drive<F: Fetcher>(
                 match answered {
                     Ok((ask, at, Ok(resp))) => {
                         s.answered(ask);
-                        answer = resp.items.iter().map(|i| i.segment).collect();
-                        s.refresh(ahead_of(&lacking, answer.iter().copied()), at);
+                        plan.answered(resp.items.clone(), at);
+                        s.refresh(plan.list(Instant::now(), dt, link(&meter, &s)), at);
                         Event::Answer(Box::new(resp))
                     }
                     Ok((_, _, Err(e))) if e.downcast_ref::<crate::net::Stale>().is_some() => {
@@ -213,6 +250,15 @@ pub async fn drive<F: Fetcher>(
     fetches.abort_all();
     if let Some(a) = asking {
         a.abort();
+    }
+}
+
+/// The link as `meter` measured it, with the wire bytes `s` has in flight.
+fn link(meter: &LinkMeter, s: &Schedule) -> Link {
+    Link {
+        rate: meter.rate(),
+        rtt_s: meter.rtt_s(),
+        in_flight: s.wire_bytes(),
     }
 }
 
@@ -308,6 +354,8 @@ mod tests {
     #[derive(Clone)]
     struct Fake {
         answer: Vec<u32>,
+        /// Listed after `answer`, needed 1,000 frames from now.
+        far: Vec<u32>,
         delay: Duration,
         reads: Arc<Mutex<Vec<Vec<u32>>>>,
     }
@@ -315,23 +363,29 @@ mod tests {
     impl Fetcher for Fake {
         type Body = ();
 
+        fn decode(&self, _: u32, _: &[u8]) -> anyhow::Result<()> {
+            Ok(())
+        }
+
         fn prefetch(
             &self,
             _: PrefetchRequest,
         ) -> impl Future<Output = anyhow::Result<PrefetchResponse>> + Send + 'static {
-            let (items, delay) = (self.answer.clone(), self.delay);
+            let near = self.answer.iter().map(|&s| (s, 1));
+            let items: Vec<(u32, u32)> = near.chain(self.far.iter().map(|&s| (s, 1000))).collect();
+            let delay = self.delay;
             async move {
                 tokio::time::sleep(delay).await;
                 Ok(PrefetchResponse {
                     version: PROTOCOL_VERSION,
                     items: items
                         .into_iter()
-                        .map(|segment| NeedItem {
+                        .map(|(segment, frames)| NeedItem {
                             segment,
                             kind: NeedKind::Geometry,
                             lod: 0,
                             bytes: 1000,
-                            frames: 1,
+                            frames,
                         })
                         .collect(),
                     evict: Vec::new(),
@@ -370,17 +424,20 @@ mod tests {
                 half_fov_y: 0.4,
                 max_speed: 1.0,
                 max_turn: 1.0,
+                turn: [0.0; 3],
             },
             held: Vec::new(),
             consumed: 0,
             wants: None,
             lacking,
+            incomplete: false,
             at: Instant::now(),
         }
     }
 
     /// Runs the driver against `fake` with one published frame state, and returns the ids in
-    /// the order the reads asked for them once `n` segments arrived.
+    /// the order the reads asked for them once `n` segments arrived and 200 ms more passed
+    /// (time for reads that should not happen to show).
     async fn reads_after(fake: Fake, state: Ask, n: usize) -> Vec<u32> {
         let (state_tx, state_rx) = watch::channel(None);
         let (tx, mut rx) = mpsc::channel(64);
@@ -401,6 +458,7 @@ mod tests {
                 Ok(None) | Err(_) => panic!("only {got} of {n} segments arrived"),
             }
         }
+        tokio::time::sleep(Duration::from_millis(200)).await;
         drop(state_tx);
         task.abort();
         fake.reads.lock().unwrap().concat()
@@ -410,6 +468,7 @@ mod tests {
     async fn a_cold_start_reads_what_the_frame_lacks_before_the_answer_comes() {
         let fake = Fake {
             answer: vec![100, 101],
+            far: Vec::new(),
             delay: Duration::from_millis(300),
             reads: Arc::default(),
         };
@@ -422,10 +481,37 @@ mod tests {
     async fn what_the_frame_lacks_goes_ahead_of_the_answer_and_is_not_read_twice() {
         let fake = Fake {
             answer: vec![100, 8, 101],
+            far: Vec::new(),
             delay: Duration::ZERO,
             reads: Arc::default(),
         };
         let reads = reads_after(fake, ask(vec![8]), 3).await;
         assert_eq!(reads, vec![8, 100, 101]);
+    }
+
+    #[tokio::test]
+    async fn read_ahead_waits_while_the_view_has_objects_with_nothing_to_draw() {
+        let fake = Fake {
+            answer: vec![100, 101],
+            far: Vec::new(),
+            delay: Duration::ZERO,
+            reads: Arc::default(),
+        };
+        let state = Ask {
+            incomplete: true,
+            ..ask(vec![7])
+        };
+        assert_eq!(reads_after(fake, state, 1).await, vec![7]);
+    }
+
+    #[tokio::test]
+    async fn what_a_later_answer_can_bring_in_time_is_not_read_yet() {
+        let fake = Fake {
+            answer: vec![100],
+            far: vec![200, 201],
+            delay: Duration::ZERO,
+            reads: Arc::default(),
+        };
+        assert_eq!(reads_after(fake, ask(vec![7]), 2).await, vec![7, 100]);
     }
 }

@@ -1,11 +1,11 @@
 //! The lookahead/IO stage (Funkhouser Ch. 6 and §5.2.3), on its own thread with its own tokio
-//! runtime: it takes the latest observer the render stage published, asks the server for the
-//! read set, keeps a few segment fetches going from the top of the latest one
-//! ([`crate::drive::drive`]), checks every segment against the manifest's checksum, uploads
-//! geometry to the GPU (the upload stage) and hands the results to the render stage through a
-//! bounded queue. The render stage never waits for it.
-
-use crate::drive::{Ask, Event, Fetcher, Items, drive};
+//! runtime: it takes the latest observer the render stage published and has the server push
+//! the read set ([`crate::stream`], the default) or asks for it and keeps a few segment
+//! fetches going from the top of the latest one ([`crate::drive::drive`]); it checks every
+//! segment against the manifest's checksum, uploads geometry to the GPU (the upload stage) and
+//! hands the results to the render stage through a bounded queue. The render stage never
+//! waits for it.
+use crate::drive::{Ask, Event, Fetcher, Items};
 use crate::net::Remote;
 use portico_data::cells::StabList;
 use portico_data::geometry::Aabb;
@@ -40,6 +40,8 @@ pub struct IoConfig {
     pub parallel: usize,
     /// Most bytes in flight or delivered and not yet taken by the frame loop.
     pub window: u64,
+    /// Server push (falling back to pull) or pull.
+    pub transport: crate::stream::Transport,
 }
 
 /// What the IO stage knows of the model: each segment's size and checksum (the manifest's
@@ -88,11 +90,19 @@ impl Fetcher for Http {
             Ok(got
                 .into_iter()
                 .map(|(id, bytes)| {
-                    let item = bytes.and_then(|b| me.decode(id, &b).map(|p| (p, b.len() as u64)));
+                    let item = bytes.and_then(|b| me.load(id, &b).map(|p| (p, b.len() as u64)));
                     (id, item)
                 })
                 .collect())
         }
+    }
+
+    fn decode(&self, id: u32, bytes: &[u8]) -> anyhow::Result<Payload> {
+        self.load(id, bytes)
+    }
+
+    fn stream_url(&self) -> anyhow::Result<String> {
+        self.remote.stream_url()
     }
 
     fn bytes(&self, id: u32) -> u64 {
@@ -114,7 +124,7 @@ impl Fetcher for Http {
 impl Http {
     /// Rejects a segment whose bytes do not match the manifest (it is counted and asked for
     /// again later), and turns the rest into cache entries.
-    fn decode(&self, id: u32, bytes: &[u8]) -> anyhow::Result<Payload> {
+    fn load(&self, id: u32, bytes: &[u8]) -> anyhow::Result<Payload> {
         verify(self.catalogue.segments.get(id as usize), id, bytes)?;
         if let Some((bounds, tile)) = self.catalogue.textures.get(&id) {
             let imp = self
@@ -191,9 +201,12 @@ impl IoStage {
                         return;
                     }
                 };
-                rt.block_on(drive(
+                // The real link's rate is not known: the server paces at its own cap.
+                rt.block_on(crate::stream::run(
                     fetcher,
                     cfg.policy,
+                    cfg.transport,
+                    u64::MAX / 2,
                     cfg.parallel,
                     cfg.window,
                     state_rx,

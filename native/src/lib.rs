@@ -1,11 +1,13 @@
 //! The native Portico client around the platform-free core (`portico_client`): the HTTP side of
 //! the protocol ([`net`]), the IO thread that reads, checks, decodes and uploads segments
-//! ([`io`], driving the core's read schedule with [`drive`]), the headless walk ([`walk`]) and
+//! ([`io`], over server push ([`stream`]) or driving the core's read schedule with [`drive`]),
+//! the headless walk ([`walk`]) and
 //! the interactive window (`window`, feature `window`).
 
 pub mod drive;
 pub mod io;
 pub mod net;
+pub mod stream;
 pub mod walk;
 #[cfg(feature = "window")]
 pub mod window;

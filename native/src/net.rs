@@ -47,6 +47,24 @@ impl Remote {
         &self.base
     }
 
+    /// The push transport's address: `ws://…/v1/stream` (`wss://` for `https://`), with the
+    /// token as `?token=` when there is one. Errors: a base that is not an `http(s)://` URL.
+    pub fn stream_url(&self) -> Result<String> {
+        let mut url = reqwest::Url::parse(&format!("{}/v1/stream", self.base))
+            .with_context(|| format!("{}: not a URL", self.base))?;
+        let scheme = match url.scheme() {
+            "https" => "wss",
+            "http" => "ws",
+            other => bail!("{}: a {other} address, not http(s)", self.base),
+        };
+        url.set_scheme(scheme)
+            .map_err(|()| anyhow::anyhow!("{}: cannot be a WebSocket address", self.base))?;
+        if let Some(t) = &self.token {
+            url.query_pairs_mut().append_pair("token", t);
+        }
+        Ok(url.into())
+    }
+
     fn get(&self, path: &str) -> reqwest::RequestBuilder {
         let r = self
             .http

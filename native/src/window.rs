@@ -191,11 +191,23 @@ impl App<'_> {
         let now = Instant::now();
         let dt = now.duration_since(self.last).as_secs_f32().min(0.25);
         self.last = now;
+        let before = self.nav.dir();
         let velocity = self.nav.update(&self.controls, dt);
+        let motion = portico_client::view::Motion {
+            velocity,
+            turn: portico_client::view::Motion::between(
+                self.nav.eye,
+                before,
+                self.nav.eye,
+                self.nav.dir(),
+                dt,
+            )
+            .turn,
+        };
         let t = now.duration_since(self.started).as_secs_f64();
         self.recorder.note(t as f32, self.nav.eye, self.nav.dir());
         let session = self.session.as_mut().context("no session")?;
-        let obs = session.observer(self.nav.eye, self.nav.dir(), velocity);
+        let obs = session.observer(self.nav.eye, self.nav.dir(), motion);
         let frame = self.frames;
         let png = self.cfg.png_every > 0 && frame.is_multiple_of(self.cfg.png_every);
         if png {

@@ -16,7 +16,9 @@ use portico_data::build::{BuildOptions, build_with};
 use portico_data::import::import_file;
 use portico_data::path::{CameraPath, PathKind, generate};
 use portico_generator::{Params, Preset};
-use portico_lab::loadtest::{Link, LoadtestConfig, LoadtestSummary, run as run_loadtest};
+use portico_lab::loadtest::{
+    Link, LoadtestConfig, LoadtestSummary, Transport, run as run_loadtest,
+};
 use portico_lab::verdict::Verdict;
 use portico_native::walk::{WalkConfig, WalkSummary, walk};
 use portico_protocol::Policy;
@@ -243,6 +245,7 @@ fn walk_tour(a: &Args, url: &str, path: &CameraPath, out: &Path) -> Result<WalkS
         fovy: 60f32.to_radians(),
         max_speed: 2.0,
         max_turn: 2.0,
+        transport: portico_native::stream::Transport::Push,
     };
     let bars = Bars::new();
     bars.start("walk", frames);
@@ -309,6 +312,7 @@ fn loadtest(
         clients,
         path: path.clone(),
         policies: vec![(policy_spec(&policy), policy)],
+        transports: vec![Transport::Pull, Transport::Push],
         baselines: true,
         link: Link::parse("rtt=20ms,rate=100mbit").map_err(anyhow::Error::msg)?,
         cache_bytes: a.cache_mb << 20,

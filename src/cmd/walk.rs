@@ -37,6 +37,10 @@ pub struct Args {
     elision: Algorithm,
     #[arg(long, default_value = "", help = values::POLICY_HELP)]
     policy: String,
+    /// How segments come: `push` (one WebSocket, /v1/stream; HTTP pull when no session opens)
+    /// or `pull` (/v1/prefetch and /v1/batch each round trip).
+    #[arg(long, default_value = "push")]
+    transport: portico_native::stream::Transport,
     /// Output directory for frames.csv, summary.json and PNGs.
     #[arg(short = 'o', long, visible_alias = "output", value_name = "DIR")]
     out: Option<PathBuf>,
@@ -110,6 +114,7 @@ pub fn run(a: Args) -> Result<()> {
         fovy: a.fov.clamp(10.0, 150.0).to_radians(),
         max_speed: 2.0,
         max_turn: 2.0,
+        transport: a.transport,
     };
     if a.window {
         let summary = interactive(&cfg, a.record)?;

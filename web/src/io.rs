@@ -14,7 +14,8 @@
 
 use crate::net::{Remote, Stale};
 use crate::stream::{Pushed, Stream};
-use portico_client::demand::ahead_of;
+use portico_client::deadline::{Link, ReadPlan};
+use portico_client::pacing::LinkMeter;
 use portico_client::schedule::Schedule;
 use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
 use std::cell::RefCell;
@@ -41,6 +42,7 @@ enum Done {
     Answer(u64, Instant, anyhow::Result<PrefetchResponse>),
     Batch(
         Vec<u32>,
+        Instant,
         anyhow::Result<Vec<(u32, anyhow::Result<Vec<u8>>)>>,
     ),
 }
@@ -89,10 +91,11 @@ pub struct Io {
     ask_after: Option<Instant>,
     /// Whether the stream carried the segments at the last frame.
     was_pushing: bool,
-    /// The latest answer's need list, and what the latest frame lacked: read in that order,
-    /// the frame's first (as `portico_native::drive`).
-    answer: Vec<u32>,
-    lacking: Vec<u32>,
+    /// The latest answer and what the latest frame lacked: the frame's first, then what of
+    /// the answer cannot wait for the next one (as `portico_native::drive`).
+    plan: ReadPlan,
+    /// The link as the reads measure it: what stays on the wire, and the deadlines.
+    meter: LinkMeter,
 }
 
 impl Io {
@@ -113,8 +116,8 @@ impl Io {
             sessions: 0,
             ask_after: None,
             was_pushing: false,
-            answer: Vec::new(),
-            lacking: Vec::new(),
+            plan: ReadPlan::default(),
+            meter: LinkMeter::default(),
             remote,
             catalogue: Rc::new(catalogue),
             policy,
@@ -140,9 +143,8 @@ impl Io {
                     match answer {
                         Ok(resp) => {
                             self.schedule.answered(ask);
-                            self.answer = resp.items.iter().map(|i| i.segment).collect();
-                            let list = ahead_of(&self.lacking, self.answer.iter().copied());
-                            self.schedule.refresh(list, at);
+                            self.plan.answered(resp.items, at);
+                            self.refresh(now);
                             out.push(Arrival::Release(resp.evict));
                         }
                         Err(e) => {
@@ -151,8 +153,16 @@ impl Io {
                         }
                     }
                 }
-                Done::Batch(ids, got) => {
+                Done::Batch(ids, sent, got) => {
                     self.batches -= 1;
+                    let wire: u64 = got.as_ref().map_or(0, |items| {
+                        items
+                            .iter()
+                            .filter_map(|(_, b)| b.as_ref().ok())
+                            .map(|b| b.len() as u64)
+                            .sum()
+                    });
+                    self.meter.finished(sent, now, wire);
                     let items = match got {
                         Ok(items) => items,
                         Err(e) => {
@@ -278,11 +288,23 @@ impl Io {
         if pushing && !self.was_pushing {
             // The stream takes over: what pull still meant to read is the stream's now.
             self.schedule.refresh(Vec::new(), now);
-            self.answer.clear();
-            self.lacking.clear();
+            self.plan.clear();
         }
         self.was_pushing = pushing;
         pushing
+    }
+
+    /// The read list from the plan at `now`.
+    fn refresh(&mut self, now: Instant) {
+        let link = Link {
+            rate: self.meter.rate(),
+            rtt_s: self.meter.rtt_s(),
+            in_flight: self.schedule.wire_bytes(),
+        };
+        let list = self
+            .plan
+            .list(now, f64::from(self.policy.frame_time_s), link);
+        self.schedule.refresh(list, now);
     }
 
     fn failure(&mut self, e: anyhow::Error) -> Arrival {
@@ -294,18 +316,26 @@ impl Io {
     }
 
     /// After a frame: asks the server about `observer` unless an answer is pending, and keeps
-    /// up to [`PARALLEL`] batches in flight from the top of the latest read list. `held`: the
-    /// segments resident in the cache; `lacking`: what the frame lacked, read first
-    /// ([`portico_client::demand`]).
-    pub fn pump(&mut self, observer: Observer, held: impl Iterator<Item = u32>, lacking: Vec<u32>) {
+    /// up to [`PARALLEL`] batches in flight from the top of the latest read list, no more on
+    /// the wire than the measured link delivers within two frames past its round trip. `held`:
+    /// the segments resident in the cache; `lacking`: what the frame lacked, read first, and
+    /// alone while the frame was `incomplete` ([`ReadPlan`]).
+    pub fn pump(
+        &mut self,
+        observer: Observer,
+        held: impl Iterator<Item = u32>,
+        lacking: Vec<u32>,
+        incomplete: bool,
+    ) {
         if self.stopped || self.pushing(observer) {
             return;
         }
-        if lacking != self.lacking {
-            self.lacking = lacking;
-            let list = ahead_of(&self.lacking, self.answer.iter().copied());
-            self.schedule.refresh(list, Instant::now());
-        }
+        // Every frame: deadlines come nearer as the answer ages.
+        self.plan.frame(lacking, incomplete);
+        self.refresh(Instant::now());
+        let frame_s = f64::from(self.policy.frame_time_s);
+        self.schedule
+            .set_wire_cap(Some(self.meter.cap(2.0 * frame_s)));
         if !self.asking && self.ask_after.is_none_or(|t| Instant::now() >= t) {
             self.asking = true;
             self.ask_after = None;
@@ -340,10 +370,12 @@ impl Io {
                 break;
             }
             self.batches += 1;
+            let sent = Instant::now();
+            self.meter.started(sent);
             let (remote, inbox) = (self.remote.clone(), self.inbox.clone());
             wasm_bindgen_futures::spawn_local(async move {
                 let got = remote.batch(&ids).await;
-                inbox.borrow_mut().push_back(Done::Batch(ids, got));
+                inbox.borrow_mut().push_back(Done::Batch(ids, sent, got));
             });
         }
     }

@@ -79,14 +79,18 @@ impl Stream {
         let mut callbacks = Vec::new();
 
         let (o, socket) = (open.clone(), ws.clone());
-        let hello = portico_protocol::to_bincode(&StreamClient::Hello {
-            version: PROTOCOL_VERSION,
-            policy,
-            rate_bytes_per_s: u64::MAX / 2,
-        })
-        .map_err(|e| e.to_string())?;
+        // The handshake took a TCP and an HTTP round trip: half of it is the round trip the
+        // server counts its push deadlines with.
+        let opened = js_sys::Date::now();
         let on_open = Closure::<dyn FnMut(JsValue)>::new(move |_| {
-            o.set(socket.send_with_u8_array(&hello).is_ok());
+            let rtt_ms = ((js_sys::Date::now() - opened) / 2.0).clamp(0.0, 10_000.0) as u32;
+            let hello = portico_protocol::to_bincode(&StreamClient::Hello {
+                version: PROTOCOL_VERSION,
+                policy,
+                rate_bytes_per_s: u64::MAX / 2,
+                rtt_ms,
+            });
+            o.set(hello.is_ok_and(|h| socket.send_with_u8_array(&h).is_ok()));
         });
         ws.set_onopen(Some(on_open.as_ref().unchecked_ref()));
         callbacks.push(on_open);

@@ -238,31 +238,43 @@ impl Viewer {
         if std::mem::take(&mut input.touched) {
             self.touring = None;
         }
-        let (eye, dir, velocity) = match (self.touring, &self.model.tour) {
+        let (eye, dir, motion) = match (self.touring, &self.model.tour) {
             (Some(start), Some(tour)) => {
                 let s = ((t - start) as f32) % tour.duration().max(1e-3);
                 let (eye, dir) = tour.sample(s);
-                let (next, _) = tour.sample(s + 0.05);
+                let (next, next_dir) = tour.sample(s + 0.05);
                 self.nav = navigator(eye, dir);
-                (eye, dir, (next - eye) / 0.05)
+                (
+                    eye,
+                    dir,
+                    view::Motion::between(eye, dir, next, next_dir, 0.05),
+                )
             }
             _ => {
-                let v = input.apply(&mut self.nav, dt as f32);
-                (self.nav.eye, self.nav.dir(), v)
+                let before = self.nav.dir();
+                let velocity = input.apply(&mut self.nav, dt as f32);
+                let (eye, dir) = (self.nav.eye, self.nav.dir());
+                let turn = view::Motion::between(eye, before, eye, dir, dt as f32).turn;
+                (eye, dir, view::Motion { velocity, turn })
             }
         };
         self.stats.touring = self.touring.is_some();
         let size = (self.config.width, self.config.height);
         let aspect = size.0 as f32 / size.1.max(1) as f32;
-        let obs = view::observer(eye, dir, velocity, FOVY, aspect, SPEED, TURN);
+        let obs = view::observer(eye, dir, motion, FOVY, aspect, SPEED, TURN);
         self.draw(&obs, size, now_ms);
         let held: Vec<u32> = self
             .cache
             .ids()
             .chain(self.too_big.iter().copied())
             .collect();
-        self.io
-            .pump(obs, held.into_iter(), std::mem::take(&mut self.lacking));
+        let incomplete = self.stats.objects_skipped > 0;
+        self.io.pump(
+            obs,
+            held.into_iter(),
+            std::mem::take(&mut self.lacking),
+            incomplete,
+        );
         self.stats.transport = self.io.transport();
         self.stats.stream_sessions = self.io.sessions;
         self.stats.eye = eye.to_array();

@@ -63,6 +63,9 @@ pub struct WalkConfig {
     pub max_speed: f32,
     /// See `max_speed`.
     pub max_turn: f32,
+    /// How the IO stage gets segments: server push (the default, falling back to pull) or
+    /// HTTP pull.
+    pub transport: crate::stream::Transport,
 }
 
 /// The first complete frame of a walk: how soon, and how many bytes it took.

@@ -10,6 +10,7 @@ use anyhow::{Context, Result};
 use glam::Vec3;
 use portico_client::elision::Algorithm;
 use portico_client::stats::FrameRow;
+use portico_client::view;
 use portico_protocol::{Observer, Policy};
 use portico_render::Renderer;
 use std::time::Instant;
@@ -56,6 +57,7 @@ impl<'a> Session<'a> {
                 policy,
                 parallel: 8,
                 window,
+                transport: cfg.transport,
             },
         )?;
         Ok(Session {
@@ -71,14 +73,15 @@ impl<'a> Session<'a> {
     pub fn path_observer(&self, t: f64) -> Observer {
         let dt = self.walker.cfg.budget_s.max(1e-3);
         let (eye, dir) = self.walker.cfg.path.sample(t as f32);
-        let (next, _) = self.walker.cfg.path.sample((t + dt) as f32);
-        self.observer(eye, dir, (next - eye) / dt as f32)
+        let (next, next_dir) = self.walker.cfg.path.sample((t + dt) as f32);
+        let motion = view::Motion::between(eye, dir, next, next_dir, dt as f32);
+        self.observer(eye, dir, motion)
     }
 
-    /// An observer at `eye` looking along `dir`, moving at `velocity`, with this client's field
+    /// An observer at `eye` looking along `dir`, moving with `motion`, with this client's field
     /// of view and announced speeds.
-    pub fn observer(&self, eye: Vec3, dir: Vec3, velocity: Vec3) -> Observer {
-        self.walker.observer(eye, dir, velocity)
+    pub fn observer(&self, eye: Vec3, dir: Vec3, motion: view::Motion) -> Observer {
+        self.walker.observer(eye, dir, motion)
     }
 
     /// Takes what arrived, then visibility → elision → render for `obs` (shown at `t` seconds,

@@ -36,6 +36,8 @@ pub(super) struct Walker<'a> {
     too_big: std::collections::HashSet<u32>,
     /// What the last frame lacked ([`portico_client::demand::lacking`]), for the IO stage.
     lacking: Vec<u32>,
+    /// Whether the last frame skipped objects ([`crate::drive::Ask::incomplete`]).
+    incomplete: bool,
     latencies: Vec<f64>,
     failures: u64,
     database_changed: bool,
@@ -69,6 +71,7 @@ impl<'a> Walker<'a> {
             colour_boxes: std::collections::HashMap::new(),
             too_big: std::collections::HashSet::new(),
             lacking: Vec::new(),
+            incomplete: false,
             latencies: Vec::new(),
             failures: 0,
             database_changed: false,
@@ -137,12 +140,12 @@ impl<'a> Walker<'a> {
         }
     }
 
-    pub(super) fn observer(&self, eye: Vec3, dir: Vec3, velocity: Vec3) -> Observer {
+    pub(super) fn observer(&self, eye: Vec3, dir: Vec3, motion: view::Motion) -> Observer {
         let aspect = self.cfg.size.0 as f32 / self.cfg.size.1.max(1) as f32;
         view::observer(
             eye,
             dir,
-            velocity,
+            motion,
             self.cfg.fovy,
             aspect,
             self.cfg.max_speed,
@@ -187,6 +190,7 @@ impl<'a> Walker<'a> {
         row.objects_skipped = d.frame.objects_skipped;
         let (cache, too_big) = (&self.cache, &self.too_big);
         self.lacking = lacking(&d, &scene, &|s| cache.contains(s) || too_big.contains(&s));
+        self.incomplete = d.frame.objects_skipped > 0;
 
         if let Some(h) = &self.model.header.hierarchy {
             make_colour_boxes(&mut self.colour_boxes, h, &d.boxes, r);
@@ -239,6 +243,7 @@ impl<'a> Walker<'a> {
             consumed: self.consumed,
             wants: None,
             lacking: self.lacking.clone(),
+            incomplete: self.incomplete,
             at: std::time::Instant::now(),
         }));
     }

@@ -1,0 +1,318 @@
+//! The IO stage over server push (`GET /v1/stream`, one WebSocket), the client's default
+//! transport, with HTTP pull ([`crate::drive`]) as its fallback.
+//!
+//! The session opens with `Hello` (the policy, the byte rate, the round trip: 0 at first, then
+//! what a ping measured), and from then on the client sends only its observer each frame, what
+//! the frame lacked (`Lacking`, pushed ahead of the server's list, as pull reads it ahead of
+//! the answer) and what its cache released (`Evicted`, so the server's mirror of the cache
+//! stays true and nothing is sent twice). The server pushes the observer's need list in need order, each item
+//! when it can no longer wait for a later list (Funkhouser §5.2.3 with deadlines:
+//! `portico_data::deadline`). No round trip per frame: a segment the view needs leaves the
+//! server as soon as the observer that needs it arrives.
+//!
+//! When no session opens (a proxy that does not upgrade, a server at its session limit) or the
+//! session ends (the server stopped or reloaded its database), the stage says why in a
+//! [`Event::Failed`] and goes on over HTTP pull with the same frame states.
+//!
+//! Messages go out, and pushed frames come in, through the [`Fetcher`]'s link
+//! ([`Fetcher::reaches_server`], [`Fetcher::reaches_client`]): the real client's is the
+//! network itself, the load tester's an emulated link, so both transports are measured over
+//! the same one.
+
+use crate::drive::{Ask, Event, Fetcher, drive_after};
+use futures_util::{SinkExt, StreamExt};
+use portico_protocol::{
+    MAX_LACKING, PROTOCOL_VERSION, Policy, ServerFrame, StreamClient, StreamServer,
+    parse_server_frame,
+};
+use std::collections::HashSet;
+use std::fmt;
+use std::str::FromStr;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tokio::sync::{mpsc, watch};
+use tokio_tungstenite::tungstenite::Message;
+
+/// How the IO stage gets its segments.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Transport {
+    /// Server push over `/v1/stream`, falling back to pull when no session opens or it ends.
+    #[default]
+    Push,
+    /// `POST /v1/prefetch` and `GET /v1/batch`, one answer per round trip.
+    Pull,
+}
+
+impl fmt::Display for Transport {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Transport::Push => "push",
+            Transport::Pull => "pull",
+        })
+    }
+}
+
+impl FromStr for Transport {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Transport, String> {
+        match s {
+            "push" | "stream" => Ok(Transport::Push),
+            "pull" | "http" => Ok(Transport::Pull),
+            other => Err(format!("transport {other:?}: expected push or pull")),
+        }
+    }
+}
+
+/// How long a session may take to open before the stage reads over pull instead.
+pub const OPEN_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// Runs the IO stage until the frame loop goes away: over push when `transport` says so (at
+/// `rate_bytes_per_s`, which the server may cap), over pull ([`crate::drive::drive`], with
+/// `parallel` and `window`) otherwise and once push has failed.
+#[allow(clippy::too_many_arguments)]
+pub async fn run<F: Fetcher>(
+    fetcher: F,
+    policy: Policy,
+    transport: Transport,
+    rate_bytes_per_s: u64,
+    parallel: usize,
+    window: u64,
+    mut state: watch::Receiver<Option<Ask>>,
+    tx: mpsc::Sender<Event<F::Body>>,
+) {
+    let mut events = 0;
+    if transport == Transport::Push {
+        let (ended, sent) = push(&fetcher, policy, rate_bytes_per_s, &mut state, &tx).await;
+        events = sent;
+        match ended {
+            Ended::Gone => return,
+            Ended::Failed(why) => {
+                let msg = format!("{why}; reading over HTTP pull instead");
+                if tx.send(Event::Failed(msg)).await.is_err() {
+                    return;
+                }
+                events += 1;
+            }
+        }
+    }
+    drive_after(events, fetcher, policy, parallel, window, state, tx).await;
+}
+
+/// Why a session ended.
+enum Ended {
+    /// The frame loop went away.
+    Gone,
+    /// The session did not open, or ended: why.
+    Failed(String),
+}
+
+/// What came off the socket, on its way to the frame loop.
+enum Incoming {
+    Segment {
+        id: u32,
+        bytes: Vec<u8>,
+        listed_at: Instant,
+    },
+    Failed(String),
+}
+
+/// Events handed to the frame loop, in order, and which segment each was: what the frame
+/// loop has taken ([`Ask::consumed`]) tells which segments it has seen.
+#[derive(Default)]
+struct Handed {
+    events: u64,
+    /// (event number, segment) of segments not yet known taken.
+    segments: Vec<(u64, u32)>,
+}
+
+/// One push session; returns why it ended and how many events it handed on.
+async fn push<F: Fetcher>(
+    f: &F,
+    policy: Policy,
+    rate: u64,
+    state: &mut watch::Receiver<Option<Ask>>,
+    tx: &mpsc::Sender<Event<F::Body>>,
+) -> (Ended, u64) {
+    let url = match f.stream_url() {
+        Ok(u) => u,
+        Err(e) => return (Ended::Failed(format!("{e:#}")), 0),
+    };
+    // Messages name the address, never the token.
+    let shown = url.split('?').next().unwrap_or_default().to_string();
+    // Nagle's algorithm would hold each small message (an observer, a Lacking) until the
+    // server acknowledged the one before: tens of milliseconds of delayed ACK per frame.
+    let open = tokio_tungstenite::connect_async_with_config(&url, None, true);
+    let ws = match tokio::time::timeout(OPEN_TIMEOUT, open).await {
+        Ok(Ok((ws, _))) => ws,
+        Ok(Err(e)) => return (Ended::Failed(format!("{shown}: no session: {e}")), 0),
+        Err(_) => {
+            let why = format!("{shown}: no session within {} s", OPEN_TIMEOUT.as_secs());
+            return (Ended::Failed(why), 0);
+        }
+    };
+    let (mut sink, mut socket) = ws.split();
+
+    // Out: each message leaves when the link has taken it there (order kept).
+    let (out, mut out_rx) = mpsc::unbounded_channel::<(Instant, Message)>();
+    let sender = tokio::spawn(async move {
+        while let Some((at, m)) = out_rx.recv().await {
+            tokio::time::sleep_until(at.into()).await;
+            if sink.send(m).await.is_err() {
+                break;
+            }
+        }
+        let _ = sink.close().await;
+    });
+    // In: each frame is the client's when the link has brought it; decoded, then handed on.
+    let handed = Arc::new(Mutex::new(Handed::default()));
+    let (inbox, mut in_rx) = mpsc::unbounded_channel::<(Instant, Incoming)>();
+    let (fd, txd, h) = (f.clone(), tx.clone(), handed.clone());
+    let mut delivery = tokio::spawn(async move {
+        while let Some((at, got)) = in_rx.recv().await {
+            tokio::time::sleep_until(at.into()).await;
+            let (event, segment) = match got {
+                Incoming::Segment {
+                    id,
+                    bytes,
+                    listed_at,
+                } => match fd.decode(id, &bytes) {
+                    Ok(body) => {
+                        let e = Event::Segment {
+                            id,
+                            body,
+                            bytes: bytes.len() as u64,
+                            listed_at,
+                        };
+                        (e, Some(id))
+                    }
+                    Err(e) => (Event::Failed(format!("segment {id}: {e:#}")), None),
+                },
+                Incoming::Failed(why) => (Event::Failed(why), None),
+            };
+            if txd.send(event).await.is_err() {
+                return;
+            }
+            let mut h = h.lock().unwrap_or_else(|e| e.into_inner());
+            let n = h.events;
+            h.events += 1;
+            h.segments.extend(segment.map(|s| (n, s)));
+        }
+    });
+    let send = |m: &StreamClient| {
+        let bytes = portico_protocol::to_bincode(m).unwrap_or_default();
+        let _ = out.send((f.reaches_server(), Message::Binary(bytes.into())));
+    };
+    let hello = |rtt: Duration| StreamClient::Hello {
+        version: PROTOCOL_VERSION,
+        policy,
+        rate_bytes_per_s: rate,
+        rtt_ms: rtt.as_millis().min(10_000) as u32,
+    };
+    // Hello at once (the first observer must not wait for a round trip), and again with the
+    // round trip once the ping's pong says what it is.
+    send(&hello(Duration::ZERO));
+    let pinged = Instant::now();
+    let _ = out.send((f.reaches_server(), Message::Ping(Vec::new().into())));
+
+    // What the frame loop held at its last state: what it no longer holds was evicted.
+    let mut held: HashSet<u32> = HashSet::new();
+    let mut lacking: Vec<u32> = Vec::new();
+    let mut last_observer = Instant::now();
+    let ended = loop {
+        tokio::select! {
+            changed = state.changed() => {
+                if changed.is_err() {
+                    break Ended::Gone;
+                }
+                let Some(ask) = state.borrow_and_update().clone() else { continue };
+                let now_held: HashSet<u32> = ask.held.iter().copied().collect();
+                let taken: Vec<u32> = {
+                    let mut h = handed.lock().unwrap_or_else(|e| e.into_inner());
+                    let (seen, rest) = h.segments.iter().partition(|(n, _)| *n < ask.consumed);
+                    h.segments = rest;
+                    seen.into_iter().map(|(_, s): (u64, u32)| s).collect()
+                };
+                let evicted: HashSet<u32> = held
+                    .iter()
+                    .chain(&taken)
+                    .filter(|s| !now_held.contains(s))
+                    .copied()
+                    .collect();
+                held = now_held;
+                if !evicted.is_empty() {
+                    send(&StreamClient::Evicted(evicted.into_iter().collect()));
+                }
+                // What the frame lacked goes ahead of the server's list, as pull reads it
+                // ahead of the answer (sent when it changes).
+                let mut now_lacking = ask.lacking.clone();
+                now_lacking.truncate(MAX_LACKING);
+                if now_lacking != lacking {
+                    send(&StreamClient::Lacking(now_lacking.clone()));
+                    lacking = now_lacking;
+                }
+                send(&StreamClient::Observer(ask.observer));
+                last_observer = Instant::now();
+            }
+            msg = socket.next() => {
+                let frame = match msg {
+                    Some(Ok(Message::Binary(b))) => b,
+                    Some(Ok(Message::Pong(_))) => {
+                        let rtt = f.reaches_client(0).saturating_duration_since(pinged);
+                        send(&hello(rtt));
+                        continue;
+                    }
+                    Some(Ok(Message::Close(c))) => {
+                        let why = c.map(|c| format!(" ({}: {})", c.code, c.reason)).unwrap_or_default();
+                        break Ended::Failed(format!("{shown}: the server ended the session{why}"));
+                    }
+                    Some(Ok(_)) => continue,
+                    Some(Err(e)) => break Ended::Failed(format!("{shown}: the session broke: {e}")),
+                    None => break Ended::Failed(format!("{shown}: the session ended")),
+                };
+                let at = f.reaches_client(frame.len() as u64);
+                let got = match parse_server_frame(&frame) {
+                    Ok(ServerFrame::Segment(id, bytes)) => Incoming::Segment {
+                        id,
+                        bytes: bytes.to_vec(),
+                        listed_at: last_observer,
+                    },
+                    Ok(ServerFrame::Control(StreamServer::Dropped(_))) => continue,
+                    Ok(ServerFrame::Control(StreamServer::Error(e))) => {
+                        Incoming::Failed(format!("{shown}: {}: {}", e.code, e.message))
+                    }
+                    Err(e) => Incoming::Failed(format!("{shown}: a frame does not decode: {e}")),
+                };
+                if inbox.send((at, got)).is_err() {
+                    break Ended::Gone;
+                }
+            }
+            _ = &mut delivery => break Ended::Gone,
+        }
+    };
+    drop(out);
+    sender.abort();
+    // What is on its way is delivered before pull takes over, so the events stay counted.
+    drop(inbox);
+    if !delivery.is_finished() {
+        let _ = (&mut delivery).await;
+    }
+    let events = handed.lock().unwrap_or_else(|e| e.into_inner()).events;
+    (ended, events)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn transports_parse_and_print_back() {
+        for t in [Transport::Push, Transport::Pull] {
+            assert_eq!(t.to_string().parse::<Transport>(), Ok(t));
+        }
+        assert_eq!("stream".parse::<Transport>(), Ok(Transport::Push));
+        assert_eq!(Transport::default(), Transport::Push);
+        let e = "udp".parse::<Transport>().unwrap_err();
+        assert!(e.contains("\"udp\"") && e.contains("push or pull"), "{e}");
+    }
+}
