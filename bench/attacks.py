@@ -89,7 +89,7 @@ def ws_text(payload):
 
 
 def hello():
-    return json.dumps({"Hello": {"version": 2, "policy": WIDE, "rate_bytes_per_s": 1 << 40}})
+    return json.dumps({"Hello": {"version": 3, "policy": WIDE, "rate_bytes_per_s": 1 << 40}})
 
 
 def flood(host, port, seconds):
@@ -140,7 +140,7 @@ def slow_headers(host, port, seconds):
 
 
 def held(host, port, seconds):
-    body = json.dumps({"version": 2, "observer": OBS,
+    body = json.dumps({"version": 3, "observer": OBS,
                        "policy": dict(WIDE, depth_frames=16, range_cull="direction",
                                       granularity="object", read_bytes=4 << 20),
                        "held": [0] + [1] * 399_999}, separators=(",", ":")).encode()

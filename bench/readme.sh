@@ -110,6 +110,17 @@ if [ -n "$mega" ]; then
     step bench --db mega.portico --path mtour.json --max-frames 400 \
       --algorithms regular,optimize,impostors --budget-ms "$ms" -o "mbi$ms"
   done
+  # Issue #17's comparison: prefetch, demand fetch and the oracle on flattened mega.
+  step build mega.glb -o mega.flat.portico --flatten --no-hierarchy
+  step build mega.glb -o mega.flat.z.portico --flatten --compress --no-hierarchy
+  step inspect mega.flat.z.portico
+  serve mega.flat.portico
+  for link in rtt=50ms,rate=10mbit rtt=20ms,rate=100mbit; do
+    step loadtest --clients 8 --path mtour.json --max-frames 400 --link "$link" -o "mlt-${link%%,*}"
+  done
+  step loadtest --clients 4 --path mtour.json --max-frames 400 --link rtt=20ms,rate=100mbit \
+    --cache-mb 4,16,64,256 -o mcs
+  stop
 fi
 echo
 echo "== done: every command above is the README's; outputs in $PWD"

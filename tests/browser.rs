@@ -171,7 +171,7 @@ fn native_view(db: &Path, eye: [f32; 3], dir: [f32; 3]) -> image::RgbaImage {
     let obs = view::observer(
         glam::Vec3::from(eye),
         glam::Vec3::from(dir),
-        glam::Vec3::ZERO,
+        view::Motion::default(),
         60f32.to_radians(),
         WIDTH as f32 / HEIGHT as f32,
         2.0,

@@ -85,9 +85,11 @@ fn loadtest_stress_and_bench_run_from_the_command_line() {
         names,
         [
             "depth=8,gran=object,range=frustum,look=any",
+            "depth=8,gran=object,range=frustum,look=any+push",
             "demand",
             "oracle"
-        ]
+        ],
+        "by default each policy runs over both transports, pull then push"
     );
     assert_eq!(summary["clients"], 2);
     assert!(lt.join("report.md").is_file());

@@ -130,6 +130,7 @@ fn damaged_segments_are_rejected_counted_and_fetched_again() {
         fovy: 1.0,
         max_speed: 2.0,
         max_turn: 2.0,
+        transport: portico_native::stream::Transport::Pull,
     };
     let s = walk(&cfg, &mut |_, _| {}).unwrap();
     let l = ledger.lock().unwrap();

@@ -63,7 +63,7 @@ fn import_seeds_are_the_import_cases() {
 fn prefetch_seeds() {
     // The valid seeds are answered (within the body's deadline), so the answers' bounds are
     // checked, not skipped.
-    let answered: usize = replay("fuzz/seeds/prefetch", 2, prefetch::run).iter().sum();
+    let answered: usize = replay("fuzz/seeds/prefetch", 3, prefetch::run).iter().sum();
     assert!(answered > 0, "no prefetch seed was answered");
 }
 

@@ -261,6 +261,7 @@ fn three_replicas_behind_nginx_survive_losing_one() {
             version: PROTOCOL_VERSION,
             policy: Policy::default(),
             rate_bytes_per_s: 50 << 20,
+            rtt_ms: 0,
         };
         let obs = StreamClient::Observer(portico_protocol::Observer {
             eye,
@@ -271,6 +272,7 @@ fn three_replicas_behind_nginx_survive_losing_one() {
             half_fov_y: 0.45,
             max_speed: 1.5,
             max_turn: 1.0,
+            turn: [0.0; 3],
         });
         for m in [hello, obs] {
             let bytes = portico_protocol::to_bincode(&m).unwrap();
@@ -320,6 +322,7 @@ fn three_replicas_behind_nginx_survive_losing_one() {
         fovy: 1.0,
         max_speed: 2.0,
         max_turn: 2.0,
+        transport: portico_native::stream::Transport::Pull,
     };
     let mut killed = None;
     let s = walk(&cfg, &mut |done, _| {
@@ -354,6 +357,7 @@ fn three_replicas_behind_nginx_survive_losing_one() {
         clients: 4,
         path: cfg.path.clone(),
         policies: vec![(policy_spec(&policy), policy)],
+        transports: vec![portico_lab::loadtest::Transport::Pull],
         baselines: false,
         link: Link::parse("rtt=10ms,rate=100mbit").unwrap(),
         cache_bytes: 16 << 20,
@@ -457,6 +461,7 @@ fn a_rebuild_and_a_token_behind_nginx_serve_no_stale_or_unauthorised_byte() {
         fovy: 1.0,
         max_speed: 2.0,
         max_turn: 2.0,
+        transport: portico_native::stream::Transport::Pull,
     };
     let mut rebuilt = false;
     let s = walk(&cfg, &mut |done, _| {

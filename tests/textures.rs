@@ -73,6 +73,7 @@ fn walk_tiny(db: &Path, out: &Path, cache_bytes: u64) -> WalkSummary {
         fovy: 1.0,
         max_speed: 1.5,
         max_turn: 1.5,
+        transport: portico_native::stream::Transport::Push,
     };
     walk(&cfg, &mut |_, _| {}).unwrap()
 }

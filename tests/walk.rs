@@ -36,6 +36,7 @@ fn config(server: String, out: PathBuf, cache_bytes: u64) -> WalkConfig {
         fovy: 1.0,
         max_speed: 2.0,
         max_turn: 2.0,
+        transport: portico_native::stream::Transport::Push,
     }
 }
 
@@ -51,7 +52,14 @@ fn a_walk_streams_the_building_and_draws_it_within_the_cache_budget() {
     assert!(s.cache_peak_bytes <= s.cache_budget);
     assert!(s.gpu_held_peak_bytes > 0 && s.gpu_held_peak_bytes <= s.cache_budget);
     assert_eq!(s.io_failures, 0);
-    assert!(state.metrics.requests("prefetch") > 0);
+    // Pushed (the default transport), over one session, never falling back to pull.
+    let m = &state.metrics;
+    assert_eq!(
+        m.sessions_total.load(std::sync::atomic::Ordering::Relaxed),
+        1
+    );
+    assert!(m.stream_updates.load(std::sync::atomic::Ordering::Relaxed) >= 50);
+    assert_eq!(m.requests("prefetch"), 0);
     // Nothing was read that the server did not send (fetches in flight at the end may be lost).
     assert!(
         s.bytes_read
@@ -301,6 +309,9 @@ fn a_slow_server_makes_the_client_skip_what_is_missing_never_wait() {
     let out = dir.path().join("walk");
     let mut cfg = config(slow, out, 64 << 20);
     cfg.max_frames = Some(120);
+    // Pull: each read's latency is from its request (a pushed segment's is counted from the
+    // latest observer sent before it came, which says nothing of the proxy's delay).
+    cfg.transport = portico_native::stream::Transport::Pull;
     let s = walk(&cfg, &mut |_, _| {}).unwrap();
     assert_eq!(s.frames, 120);
     assert!(s.segments_read > 0, "{s:?}");

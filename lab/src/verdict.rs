@@ -159,8 +159,8 @@ pub fn loadtest(s: &LoadtestSummary) -> Vec<Verdict> {
             if pf <= df {
                 "The first view was whole as soon as demand fetch's.".into()
             } else {
-                "Cold start: the first answers carry stab lists and read-ahead before the last \
-                 objects in view, which demand fetch asks for first."
+                "Cold start: what the view lacked was read first, as demand fetch reads it, \
+                 but it shared the link with read-ahead already on the wire."
                     .into()
             },
         ));

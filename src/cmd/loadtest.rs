@@ -58,6 +58,10 @@ pub struct Args {
     /// Leave out the demand-fetch and oracle baselines.
     #[arg(long)]
     no_baselines: bool,
+    /// The transports each policy runs over, in the same session: `pull` (/v1/prefetch and
+    /// /v1/batch), `push` (/v1/stream; runs named `<policy>+push`), or both.
+    #[arg(long, value_delimiter = ',', default_value = "pull,push")]
+    transport: Vec<portico_lab::loadtest::Transport>,
     /// Output directory for summary.json, report.md, frames.csv and the plots.
     #[arg(short = 'o', long, visible_alias = "output", value_name = "DIR")]
     out: PathBuf,
@@ -129,6 +133,7 @@ pub fn run(a: Args) -> Result<()> {
         clients: a.clients,
         path,
         policies,
+        transports: a.transport.clone(),
         baselines: !a.no_baselines,
         link,
         cache_bytes: a.cache_mb[0] << 20,

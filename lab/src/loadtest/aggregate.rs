@@ -3,7 +3,7 @@
 //! server's answers and CPU, and every run's ratio to demand fetch.
 
 use super::sim::{self, ClientResult, FrameStat, Mode};
-use super::{ClientFigures, LoadtestConfig, PolicyResult, WARMUP_S, cpu};
+use super::{ClientFigures, LoadtestConfig, PolicyResult, Transport, WARMUP_S, cpu};
 use portico_client::stats::Series;
 
 /// One policy's figures from its clients' results.
@@ -62,15 +62,20 @@ pub(super) fn aggregate(
         first_complete_frame_mean: mean_of(&|c| c.0),
         first_complete_bytes_mean: mean_of(&|c| c.1),
         kind: match mode {
-            Mode::Prefetch(_) => "prefetch",
+            Mode::Prefetch(..) => "prefetch",
             Mode::Demand => "demand",
             Mode::Oracle { .. } => "oracle",
         }
         .into(),
         policy: match mode {
-            Mode::Prefetch(p) => Some(p),
+            Mode::Prefetch(p, _) => Some(p),
             _ => None,
         },
+        transport: match mode {
+            Mode::Prefetch(_, t) => t,
+            _ => Transport::Pull,
+        }
+        .to_string(),
         name,
         frames: rows.len() as u64,
         lods_skipped_mean: lods.mean,
@@ -90,6 +95,11 @@ pub(super) fn aggregate(
         segments_fetched: sum(&|c| c.segments_fetched),
         bytes_wasted: sum(&|c| c.bytes_wasted),
         bytes_wasted_per_client: sum(&|c| c.bytes_wasted) / n_clients,
+        waste_per_client: {
+            let mut w = super::waste::Waste::default();
+            clients.iter().for_each(|c| w.add(&c.waste));
+            w.per(n_clients)
+        },
         cache_hit_rate: if wanted == 0 {
             1.0
         } else {
@@ -139,6 +149,7 @@ fn client_figures(c: &ClientResult) -> ClientFigures {
         fallback_frames: c.rows.iter().filter(|r| r.fallback).count() as u64,
         bytes_fetched: c.bytes_fetched,
         io_failures: c.failures,
+        first_complete: c.first_complete,
     }
 }
 

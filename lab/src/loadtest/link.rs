@@ -189,6 +189,13 @@ impl Pipe {
     /// Delivers a response body of `bytes`: waits until the pipe has carried it at the link's
     /// rate after everything queued before it, then for the answer's half of the round trip.
     pub async fn deliver(&self, bytes: u64) {
+        tokio::time::sleep_until(self.stamp(bytes)).await;
+    }
+
+    /// Queues `bytes` on the pipe now and says when they are in the client's hands: once the
+    /// pipe has carried them at the link's rate after everything queued before them, and half
+    /// the round trip later.
+    pub fn stamp(&self, bytes: u64) -> Instant {
         let transfer = Duration::from_secs_f64(self.link.transfer_s(bytes));
         let done = {
             let mut free = self.free_at.lock().unwrap_or_else(|e| e.into_inner());
@@ -196,13 +203,17 @@ impl Pipe {
             *free = start + transfer;
             *free
         };
-        tokio::time::sleep_until(done).await;
-        self.half_rtt().await;
+        done + self.half_rtt_duration()
+    }
+
+    /// Half the round trip.
+    pub fn half_rtt_duration(&self) -> Duration {
+        Duration::from_secs_f64(self.link.rtt_s.max(0.0) / 2.0)
     }
 
     async fn half_rtt(&self) {
         if self.link.rtt_s > 0.0 {
-            tokio::time::sleep(Duration::from_secs_f64(self.link.rtt_s / 2.0)).await;
+            tokio::time::sleep(self.half_rtt_duration()).await;
         }
     }
 }
@@ -250,20 +261,34 @@ impl Fetcher for Linked {
             Ok(got
                 .into_iter()
                 .map(|(id, b)| {
-                    let item = b.and_then(|b| {
-                        let resident = if portico_data::codec::is_compressed(&b) {
-                            portico_data::codec::decode(&b)
-                                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?
-                                .len()
-                        } else {
-                            b.len()
-                        };
-                        Ok((resident as u64, b.len() as u64))
-                    });
+                    let item = b.and_then(|b| Ok((me.decode(id, &b)?, b.len() as u64)));
                     (id, item)
                 })
                 .collect())
         }
+    }
+
+    fn decode(&self, id: u32, bytes: &[u8]) -> anyhow::Result<u64> {
+        let resident = if portico_data::codec::is_compressed(bytes) {
+            portico_data::codec::decode(bytes)
+                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?
+                .len()
+        } else {
+            bytes.len()
+        };
+        Ok(resident as u64)
+    }
+
+    fn stream_url(&self) -> anyhow::Result<String> {
+        self.remote.stream_url()
+    }
+
+    fn reaches_server(&self) -> std::time::Instant {
+        (Instant::now() + self.pipe.half_rtt_duration()).into_std()
+    }
+
+    fn reaches_client(&self, bytes: u64) -> std::time::Instant {
+        self.pipe.stamp(bytes).into_std()
     }
 
     fn bytes(&self, id: u32) -> u64 {

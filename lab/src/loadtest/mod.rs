@@ -7,8 +7,10 @@
 //! decision ([`portico_client::frame`]) with the `optimize` elider and the default cost model,
 //! frames at the frame budget in real time, and the render never waits: what is not resident is
 //! skipped and counted. Clients replay one path, client `i` starting `i/N` of the way along it
-//! (wrapping), and talk HTTP to the server (`/v1/prefetch`, `/v1/segments/{id}`) through an
-//! emulated link each ([`link`]: round-trip time per request, a token bucket at the link rate).
+//! (wrapping), and talk to the server through an emulated link each ([`link`]: round-trip time
+//! per request, a token bucket at the link rate): over HTTP pull (`/v1/prefetch`,
+//! `/v1/batch`), or over server push (`/v1/stream`), each policy once per transport asked for,
+//! in the same session.
 //!
 //! Policies run one after another with fresh clients (empty caches) on the same path and link.
 //! Two baselines run in the same session: **demand** fetch (no lookahead: each frame fetch the
@@ -32,6 +34,7 @@ pub mod stress;
 pub mod stress_plot;
 pub mod stress_stream;
 pub mod sweep;
+pub mod waste;
 pub mod world;
 
 mod aggregate;
@@ -44,6 +47,7 @@ pub use sweep::{UnknownSweep, grid};
 
 use anyhow::{Context, Result, bail};
 use portico_data::path::CameraPath;
+pub use portico_native::stream::Transport;
 use portico_protocol::Policy;
 use runner::run_all;
 use sim::Mode;
@@ -86,6 +90,10 @@ pub struct LoadtestConfig {
     /// Named prefetch policies to measure, in order (their `cache_bytes`, `frame_time_s` and
     /// `screen` are set from this config).
     pub policies: Vec<(String, Policy)>,
+    /// How the policies' clients get their segments: each policy runs once per transport, in
+    /// this order (pull runs keep the policy's name, push runs add `+push`); the baselines
+    /// always pull (their lists are their own).
+    pub transports: Vec<Transport>,
     /// Also run the demand-fetch and oracle baselines.
     pub baselines: bool,
     /// Each client's emulated link.
@@ -123,20 +131,23 @@ impl LoadtestConfig {
 
     /// The runs in order: the policies, then the baselines.
     fn runs(&self) -> Vec<(String, Mode)> {
-        let mut runs: Vec<(String, Mode)> = self
-            .policies
-            .iter()
-            .map(|(name, p)| {
-                let policy = Policy {
-                    // The lookahead stops at the cache's own part of the budget.
-                    cache_bytes: portico_client::cache::split_budget(self.cache_bytes).0,
-                    frame_time_s: self.budget_s as f32,
-                    screen: [world::SCREEN.0, world::SCREEN.1],
-                    ..*p
+        let mut runs: Vec<(String, Mode)> = Vec::new();
+        for (name, p) in &self.policies {
+            let policy = Policy {
+                // The lookahead stops at the cache's own part of the budget.
+                cache_bytes: portico_client::cache::split_budget(self.cache_bytes).0,
+                frame_time_s: self.budget_s as f32,
+                screen: [world::SCREEN.0, world::SCREEN.1],
+                ..*p
+            };
+            for &t in &self.transports {
+                let run = match t {
+                    Transport::Pull => name.clone(),
+                    Transport::Push => format!("{name}+push"),
                 };
-                (name.clone(), Mode::Prefetch(policy))
-            })
-            .collect();
+                runs.push((run, Mode::Prefetch(policy, t)));
+            }
+        }
         if self.baselines {
             runs.push(("demand".into(), Mode::Demand));
             runs.push((
@@ -168,6 +179,9 @@ impl LoadtestConfig {
         }
         if self.cache_bytes == 0 {
             bail!("the cache budget must be more than 0 bytes");
+        }
+        if !self.policies.is_empty() && self.transports.is_empty() {
+            bail!("no transport to run the policies over (expected pull, push or both)");
         }
         if self.policies.is_empty() && !self.baselines {
             bail!("nothing to run: no policies and no baselines");

@@ -29,6 +29,7 @@ fn look(l: LookaheadCull) -> &'static str {
         LookaheadCull::Any => "Any",
         LookaheadCull::Plane => "Plane",
         LookaheadCull::Frustum => "Frust",
+        LookaheadCull::Predicted => "Pred",
     }
 }
 
@@ -53,6 +54,7 @@ pub fn markdown(s: &LoadtestSummary) -> String {
     set_table(&mut r, s);
     pivots(&mut r, s);
     network_table(&mut r, s);
+    waste(&mut r, s);
     first_complete(&mut r, s);
     per_client(&mut r, s);
     plots(&mut r, s);
@@ -172,6 +174,34 @@ fn first_complete(r: &mut String, s: &LoadtestSummary) {
             r,
             "| {} | {} of {} | {frame} | {bytes} |",
             p.name, p.complete_clients, s.clients
+        );
+    }
+    r.push('\n');
+}
+
+/// Where the bytes never drawn went ([`super::waste`]), per client.
+fn waste(r: &mut String, s: &LoadtestSummary) {
+    let _ = writeln!(
+        r,
+        "## Bytes never drawn, by reason (MB per client)
+
+| run | fetched | never drawn | objects no frame drew | finer than any LOD drawn | coarser than the finest drawn | textures | stab lists | arrived twice |
+|---|---|---|---|---|---|---|---|---|"
+    );
+    for p in &s.policies {
+        let w = &p.waste_per_client;
+        let _ = writeln!(
+            r,
+            "| {} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            p.name,
+            mb(p.bytes_fetched_per_client),
+            mb(p.bytes_wasted_per_client),
+            mb(w.object_never_drawn),
+            mb(w.finer_than_drawn),
+            mb(w.coarser_than_drawn),
+            mb(w.textures),
+            mb(w.stab_lists),
+            mb(w.twice)
         );
     }
     r.push('\n');
@@ -410,11 +440,13 @@ fn method(r: &mut String, s: &LoadtestSummary) {
 - {n} simulated clients per run, client *i* starting *i*/{n} of the way along the path (wrapping), frames every {ms:.0} ms of real time, frame-indexed; every run starts with empty caches.\n\
 - Each client runs the real client's visibility (eye-to-cell/eye-to-object with the eye cell's stab list when it is resident, frustum culling otherwise), candidates and the `optimize` elider with the default cost model over RESIDENT LODs; it never waits (Funkhouser §5.2.4). As in Funkhouser's §5.3 tests, the elider is combined with a static size threshold ({px} pixels per triangle, the policy's, which the server also uses to cap each lookahead object's LOD): no client wants a LOD finer than that.\n\
 - **LODs skipped**: levels given up for a coarser resident LOD. **Objects skipped**: wanted objects with no resident LOD. **LOD deficit**: LODs skipped plus, per skipped object, the levels from the wanted one down to the coarsest. **Hit rate**: of the LODs the elider wanted, the fraction resident. **Wasted**: fetched bytes never drawn before their release or the end of the run (or fetched twice).\n\
-- **Latency**: from the prefetch request whose answer listed a segment (demand/oracle: the frame whose list first named it) until it was resident in the cache.\n\
+- **Latency**: from the prefetch request whose answer listed a segment (demand/oracle: the frame whose list first named it; `+push` runs: the latest observer sent before it came, a lower bound) until it was resident in the cache.\n\
+- Runs named `+push` take the same policy over server push (`/v1/stream`): the observer sent every frame through the client's half of the round trip, segments pushed at the link's rate (the session is paced to it) and brought through the same token bucket and the other half; the others pull (`/v1/prefetch` and `/v1/batch`).\n\
 - Range cells, lookahead objects and compute time are per prefetch answer (`/v1/prefetch`, computed on the server); lookahead MB is the latest answer's `lookahead_bytes` at each frame.\n\
 - **demand**: each frame asks for exactly the missing LODs its elider wanted (and the eye cell's stab list), biggest on screen first. **oracle**: knows the path; each frame asks for what a client with everything resident would draw in the next {k} frames, nearest first, up to the cache budget.\n\
 - Each client has its own link ({link}): half the round trip before each request and half after its answer, response bodies paced by a token bucket at the link rate; up to 8 segment fetches in flight.\n\
-- The server's decoded stab lists stay warm from one run to the next (everything else it keeps is per request).",
+- The server's decoded stab lists stay warm from one run to the next (everything else it keeps is per request); before the first run an unmeasured pass of it over the clients' first 20 frames warms the server, so that no run pays for the server's own cold start.\n\
+- **Bytes never drawn, by reason**: of the fetched segments no frame drew, the geometry of objects no frame drew at any LOD, LODs finer than every LOD of their object drawn, coarser ones never drawn, textures, stab lists, and segments that arrived twice.",
         n = s.clients,
         ms = s.budget_s * 1e3,
         k = s.oracle_lookahead_frames,

@@ -6,16 +6,18 @@
 //!
 //! Its IO task is the real client's ([`portico_native::drive::drive`]) fetching through the
 //! client's emulated [`Pipe`], with its need list made in one of three ways:
-//! - [`Mode::Prefetch`]: the server's lookahead, as the real client: post the observer and the
-//!   held set to `/v1/prefetch` once per frame, demote the eviction hints, read what the
-//!   frame lacked and then the latest answer's items in need order a few at a time
-//!   (Funkhouser §5.2–5.3);
+//! - [`Mode::Prefetch`]: the server's lookahead, as the real client: over pull, post the
+//!   observer and the held set to `/v1/prefetch` once per frame, demote the eviction hints,
+//!   read what the frame lacked and then the latest answer's items in need order a few at a
+//!   time (Funkhouser §5.2–5.3); over push, send the observer each frame and take what the
+//!   server pushes ([`portico_native::stream`]);
 //! - [`Mode::Demand`]: no lookahead; each frame the client asks for exactly the LODs its elider
 //!   wanted and did not have (and the eye cell's stab list), computed from its visible set;
 //! - [`Mode::Oracle`]: knows the future path; each frame it asks for what an omniscient client
 //!   would draw in the next frames, nearest in time first.
 
 use super::link::{Linked, Pipe};
+use super::waste::{Ledger, Waste};
 use super::world::World;
 use crate::drawn::DrawnFrame;
 use portico_client::cache::ObjectCache;
@@ -24,8 +26,9 @@ use portico_client::demand::{ahead_of, lacking};
 use portico_client::elision::{Algorithm, Candidate, Choice};
 use portico_client::frame::{Decider, Decision, Resident};
 use portico_data::cells::StabList;
-use portico_native::drive::{Ask, Event, drive};
+use portico_native::drive::{Ask, Event};
 use portico_native::net::Remote;
+use portico_native::stream::{Transport, run};
 use portico_protocol::Policy;
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
@@ -38,8 +41,8 @@ use tokio::time::MissedTickBehavior;
 /// How a simulated client gets its data.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Mode {
-    /// The server's prefetch answers (Funkhouser §5.2) with this policy.
-    Prefetch(Policy),
+    /// The server's prefetch answers (Funkhouser §5.2) with this policy, pulled or pushed.
+    Prefetch(Policy, Transport),
     /// Fetch on demand what the elider wanted and did not have.
     Demand,
     /// Fetch what will be drawn in the next `lookahead` frames, nearest first.
@@ -108,6 +111,8 @@ pub struct ClientResult {
     pub segments_fetched: u64,
     /// Arrived bytes never drawn before their release or the end (or arrived twice).
     pub bytes_wasted: u64,
+    /// `bytes_wasted` by reason.
+    pub waste: Waste,
     /// Peak cache bytes.
     pub cache_peak: u64,
     /// Segments released.
@@ -158,15 +163,27 @@ pub async fn client(s: Setup) -> ClientResult {
     };
     // Demand fetch and the oracle make their own lists; of the policy they use only the frame
     // time, which paces every run's reads alike.
-    let policy = match s.mode {
-        Mode::Prefetch(p) => p,
-        Mode::Demand | Mode::Oracle { .. } => Policy {
-            frame_time_s: s.world.dt as f32,
-            ..Policy::default()
-        },
+    let (policy, transport) = match s.mode {
+        Mode::Prefetch(p, t) => (p, t),
+        Mode::Demand | Mode::Oracle { .. } => (
+            Policy {
+                frame_time_s: s.world.dt as f32,
+                ..Policy::default()
+            },
+            Transport::Pull,
+        ),
     };
     let window = portico_client::cache::split_budget(s.cache_bytes).1;
-    let task = tokio::spawn(drive(link, policy, PARALLEL, window, state_rx, tx));
+    // A push session is paced to the link's rate (the server caps an unlimited one).
+    let rate = s.pipe.link().rate_bytes_per_s;
+    let rate = if rate.is_finite() {
+        rate as u64
+    } else {
+        u64::MAX / 2
+    };
+    let task = tokio::spawn(run(
+        link, policy, transport, rate, PARALLEL, window, state_rx, tx,
+    ));
     let mut c = Client::new(&s, rx);
     let mut tick = tokio::time::interval(Duration::from_secs_f64(s.world.dt.max(1e-3)));
     tick.set_missed_tick_behavior(MissedTickBehavior::Delay);
@@ -206,6 +223,8 @@ struct Client {
     last_answer: Option<AnswerStat>,
     result: ClientResult,
     record: bool,
+    /// What was drawn and what arrived in vain, for [`ClientResult::waste`].
+    ledger: Ledger,
 }
 
 impl Client {
@@ -219,7 +238,7 @@ impl Client {
             entries: HashMap::new(),
             decider: Decider::new(
                 match s.mode {
-                    Mode::Prefetch(p) if p.impostors && s.world.header.hierarchy.is_some() => {
+                    Mode::Prefetch(p, _) if p.impostors && s.world.header.hierarchy.is_some() => {
                         Algorithm::Impostors
                     }
                     _ => Algorithm::Optimize,
@@ -232,6 +251,7 @@ impl Client {
             last_answer: None,
             result: ClientResult::default(),
             record: s.record,
+            ledger: Ledger::default(),
         }
     }
 
@@ -274,6 +294,7 @@ impl Client {
         r.segments_fetched += 1;
         if self.cache.contains(id) {
             r.bytes_wasted += bytes; // fetched twice
+            self.ledger.twice(bytes);
             return;
         }
         match self.cache.insert(id, (), resident) {
@@ -281,11 +302,15 @@ impl Client {
                 for gone in released {
                     if let Some((b, false)) = self.entries.remove(&gone) {
                         r.bytes_wasted += b;
+                        self.ledger.unused(gone, b);
                     }
                 }
                 self.entries.insert(id, (bytes, false));
             }
-            Err(_) => r.bytes_wasted += bytes,
+            Err(_) => {
+                r.bytes_wasted += bytes;
+                self.ledger.unused(id, bytes);
+            }
         }
     }
 
@@ -329,10 +354,12 @@ impl Client {
         for &s in &d.touched {
             self.cache.touch(s);
         }
+
         for s in used {
             if let Some(e) = self.entries.get_mut(&s) {
                 e.1 = true;
             }
+            self.ledger.drew(&w.chains, s);
         }
         (row, d)
     }
@@ -340,7 +367,7 @@ impl Client {
     /// What the IO task gets after frame `f` (path frame `p`).
     fn publish(&mut self, p: usize, f: u64, d: &Decision) -> Ask {
         let (wants, lacking) = match self.mode {
-            Mode::Prefetch(_) => (None, self.missing_now(d)),
+            Mode::Prefetch(..) => (None, self.missing_now(d)),
             Mode::Demand => (Some(self.demand_wants(d)), Vec::new()),
             Mode::Oracle { lookahead } => {
                 let left = self.frames.saturating_sub(f);
@@ -356,6 +383,7 @@ impl Client {
             consumed: self.consumed,
             wants,
             lacking,
+            incomplete: d.frame.objects_skipped > 0,
             at: Instant::now(),
         }
     }
@@ -407,13 +435,15 @@ impl Client {
 
     /// Counts what was never drawn among the segments still resident.
     fn finish(mut self) -> ClientResult {
-        let never: u64 = self
-            .entries
-            .values()
-            .filter(|(_, drawn)| !drawn)
-            .map(|(b, _)| b)
-            .sum();
+        let mut never = 0;
+        for (&s, &(b, drawn)) in &self.entries {
+            if !drawn {
+                never += b;
+                self.ledger.unused(s, b);
+            }
+        }
         self.result.bytes_wasted += never;
+        self.result.waste = self.ledger.waste(&self.world.chains);
         self.result.cache_peak = self.cache.peak_bytes();
         self.result.evictions = self.cache.evictions();
         self.result

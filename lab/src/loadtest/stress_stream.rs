@@ -282,6 +282,7 @@ async fn one_client(
         version: PROTOCOL_VERSION,
         policy: cfg.policy,
         rate_bytes_per_s: cfg.rate_bytes_per_s,
+        rtt_ms: 0,
     };
     let encode = |m: &StreamClient| {
         Message::Binary(portico_protocol::to_bincode(m).unwrap_or_default().into())

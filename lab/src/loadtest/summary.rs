@@ -93,6 +93,8 @@ pub struct PolicyResult {
     pub kind: String,
     /// The policy sent to the server (prefetch runs).
     pub policy: Option<Policy>,
+    /// `pull` or `push` (the baselines always pull).
+    pub transport: String,
     /// Frames played, all clients together.
     pub frames: u64,
     /// LODs skipped per frame (Funkhouser §5.2.4), mean.
@@ -134,6 +136,8 @@ pub struct PolicyResult {
     pub bytes_wasted: u64,
     /// Fetched bytes never drawn per client, mean.
     pub bytes_wasted_per_client: u64,
+    /// `bytes_wasted_per_client` by reason.
+    pub waste_per_client: super::waste::Waste,
     /// Of the LODs the elider wanted, the fraction resident.
     pub cache_hit_rate: f64,
     /// Seconds from a segment's first listing (prefetch answer, demand or oracle list) to its
@@ -222,4 +226,7 @@ pub struct ClientFigures {
     pub bytes_fetched: u64,
     /// Failed requests.
     pub io_failures: u64,
+    /// Its first complete frame (every visible object drawn) and the bytes that had arrived by
+    /// then; `None` if it never had one.
+    pub first_complete: Option<(u64, u64)>,
 }

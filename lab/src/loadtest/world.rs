@@ -71,6 +71,9 @@ pub struct World {
     /// The static size threshold (pixels per triangle) that caps every client's detail, as the
     /// server caps the lookahead (see [`view::cap_detail`]).
     pub size_threshold_px: f32,
+    /// Each geometry segment's LOD chain and level, and every segment's kind (for the waste
+    /// breakdown).
+    pub chains: super::waste::Chains,
 }
 
 impl World {
@@ -163,9 +166,9 @@ pub fn path_frames(path: &CameraPath, dt: f64, far: f32) -> Vec<PathFrame> {
         .map(|f| {
             let t = (f as f64 * dt) as f32;
             let (eye, dir) = path.sample(t);
-            let (next, _) = path.sample(t + dt as f32);
-            let velocity = (next - eye) / dt as f32;
-            let observer = view::observer(eye, dir, velocity, fovy, aspect, max_speed, max_turn);
+            let (next, next_dir) = path.sample(t + dt as f32);
+            let motion = view::Motion::between(eye, dir, next, next_dir, dt as f32);
+            let observer = view::observer(eye, dir, motion, fovy, aspect, max_speed, max_turn);
             PathFrame {
                 viewpoint: Viewpoint::of(&observer, SCREEN, far),
                 observer,
@@ -201,6 +204,7 @@ pub async fn load(remote: &Remote, path: &CameraPath, plan: Plan) -> Result<Worl
     }
     let mut world = World {
         bounds: m.header.instances.iter().map(|i| i.bounds).collect(),
+        chains: super::waste::Chains::new(&m.header, m.segments.iter().map(|s| s.kind).collect()),
         header: m.header,
         graph,
         database_id: m.database_id,
