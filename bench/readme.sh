@@ -66,13 +66,13 @@ step verify soda.portico --rays 50000
 step cull soda.portico --tour 20
 
 serve soda.portico
-step loadtest --path tour.json --stress 1,16,64 -o st
-step loadtest --path tour.json --stress 1,16,64 -o st-closed --closed-loop
+step loadtest --path tour.json --stress 1,16,64 --policy depth=16,gran=object,range=direction,look=any -o st
+step loadtest --path tour.json --stress 1,16,64 --policy depth=16,gran=object,range=direction,look=any -o st-closed --closed-loop
 # A crowd on the push stream: shared need lists, then every observer its own (the baseline).
-step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1kbit -o ss
-step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1mbit -o ss-push
+step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1kbit --policy depth=16,gran=object,range=direction,look=any -o ss
+step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1mbit --policy depth=16,gran=object,range=direction,look=any -o ss-push
 serve soda.portico --exact-answers
-step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1kbit -o ss-exact --baseline ss
+step loadtest --path tour.json --stress 1,64,256,1000 --stream --stress-seconds 8 --link rtt=0ms,rate=1kbit --policy depth=16,gran=object,range=direction,look=any -o ss-exact --baseline ss
 
 serve soda.flat.portico
 step walk --server http://127.0.0.1:7878 --path tour.json --cache-mb 64 --max-frames 2400 -o w64

@@ -121,10 +121,10 @@ fn loadtest_stress_and_bench_run_from_the_command_line() {
         assert_eq!(l["errors"], 0, "{l}");
     }
 
-    // The push transport under a crowd, measured from the server's /metrics: one place's list
-    // serves every observer in it, so four walkers compute far fewer lists than they send
-    // updates (each session changes lists only when it changes place), and the server's CPU
-    // per update is measured, not zero.
+    // The push transport under a crowd, measured from the server's /metrics: under the range
+    // lookahead one place's list serves every observer in it, so four walkers compute far
+    // fewer lists than they send updates (each session changes lists only when it changes
+    // place), and the server's CPU per update is measured, not zero.
     let ss = dir.path().join("stream-stress");
     let said = ok(&[
         "loadtest",
@@ -132,6 +132,8 @@ fn loadtest_stress_and_bench_run_from_the_command_line() {
         &server.1,
         "--path-kind",
         "tour",
+        "--policy",
+        "depth=8,gran=object,range=frustum,look=any",
         "--stress",
         "1,4",
         "--stream",
@@ -187,6 +189,17 @@ fn loadtest_stress_and_bench_run_from_the_command_line() {
     ];
     ok(&[&base[..], &tail[..], &[s(&ss)]].concat());
     assert!(again.join("scaling.png").is_file());
+    // The default policy, the predicted lookahead, depends on each observer's motion: every
+    // list a session takes was computed for it (one per session may have started before the
+    // window), and the report says they were not shared.
+    let own = json(&again.join("stress.json"));
+    let level = &own["levels"][0];
+    assert_eq!(level["shared_answers"], false, "{own}");
+    let (computed, taken) = (
+        level["lists_computed"].as_u64().unwrap(),
+        level["lists_taken"].as_u64().unwrap(),
+    );
+    assert!(taken > 0 && computed + 2 >= taken, "{own}");
     // Refused before any level runs: nothing is written.
     let never = dir.path().join("never");
     let tail = ["--stream", "-o", s(&never), "--baseline", s(&st)];

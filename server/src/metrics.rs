@@ -43,6 +43,10 @@ pub struct Metrics {
     pub prefetch_answers: AtomicU64,
     /// Observers received on stream sessions.
     pub stream_updates: AtomicU64,
+    /// Need lists stream sessions computed for their own observer, shared with nobody (the
+    /// predicted lookahead depends on the observer's motion; a model without cells has no
+    /// places).
+    pub stream_own_lists: AtomicU64,
     /// Stream updates by seconds from arrival to the need list in place (0 when the observer
     /// stayed in its place), bucketed by [`BUCKETS`].
     update_buckets: [AtomicU64; BUCKETS.len()],
@@ -167,12 +171,18 @@ impl Metrics {
         let sum = self.update_sum_us.load(Relaxed) as f64 / 1e6;
         let _ = writeln!(s, "portico_stream_update_seconds_sum {sum}");
         let _ = writeln!(s, "portico_stream_update_seconds_count {n}");
-        let gauges: [(&str, &str, &str, i64); 9] = [
+        let gauges: [(&str, &str, &str, i64); 10] = [
             (
                 "portico_stream_updates_total",
                 "counter",
                 "Observers received on stream sessions (a newer one may replace one waiting).",
                 self.stream_updates.load(Relaxed) as i64,
+            ),
+            (
+                "portico_stream_own_lists_total",
+                "counter",
+                "Need lists stream sessions computed for their own observer (not shared).",
+                self.stream_own_lists.load(Relaxed) as i64,
             ),
             (
                 "portico_bytes_sent_total",

@@ -218,7 +218,10 @@ impl Session {
                     let p = &s.prefetcher;
                     match &key {
                         Some(k) => p.shared_list(k, &obs, &policy, &budget),
-                        None => p.need_list_within(&obs, &policy, &budget).map(Arc::new),
+                        None => {
+                            s.metrics.stream_own_lists.fetch_add(1, Relaxed);
+                            p.need_list_within(&obs, &policy, &budget).map(Arc::new)
+                        }
                     }
                     .map_err(Error::from)
                 })

@@ -50,7 +50,9 @@ pub struct StreamStressConfig {
 pub struct StreamLevel {
     /// Sessions asked for.
     pub clients: usize,
-    /// Whether the server shared need lists (`None`: it did not say).
+    /// Whether the sessions' need lists were shared (`None`: the server did not say): the
+    /// server shares them, and the policy allows it (a predicted lookahead is each observer's
+    /// own).
     #[serde(default)]
     pub shared_answers: Option<bool>,
     /// Sessions the server accepted.
@@ -74,7 +76,8 @@ pub struct StreamLevel {
     pub update_p99_s: f64,
     /// Ping round trips after each update, at the clients (s).
     pub ping_s: Series,
-    /// Need lists the server computed in the window (shared-cache misses).
+    /// Need lists the server computed in the window (shared-cache misses, and the lists
+    /// sessions computed for their own observer).
     pub lists_computed: u64,
     /// Need lists the sessions changed to in the window (a change of place: from the shared
     /// cache or computed; with exact answers, one per update served).
@@ -98,6 +101,8 @@ pub struct ServerSample {
     pub updates: f64,
     /// `portico_shared_misses_total`.
     pub misses: f64,
+    /// `portico_stream_own_lists_total` (0 from a server before it).
+    pub own_lists: f64,
     /// `portico_prefetch_answers_total`.
     pub answers: f64,
     /// `portico_shared_answers`: whether the server shares need lists (`None`: not said).
@@ -124,6 +129,7 @@ impl ServerSample {
                 "process_resident_memory_bytes" => s.rss = v,
                 "portico_stream_updates_total" => s.updates = v,
                 "portico_shared_misses_total" => s.misses = v,
+                "portico_stream_own_lists_total" => s.own_lists = v,
                 "portico_prefetch_answers_total" => s.answers = v,
                 "portico_shared_answers" => s.shared = Some(v > 0.0),
                 _ => {
@@ -230,9 +236,10 @@ pub async fn level(cfg: &StreamStressConfig, clients: usize) -> Result<StreamLev
     let updates = (after.updates - before.updates).max(0.0);
     let cpu = (after.cpu_s - before.cpu_s).max(0.0);
     let pings = std::mem::take(&mut *shared.pings.lock().unwrap_or_else(|e| e.into_inner()));
+    let own = (after.own_lists - before.own_lists).max(0.0);
     Ok(StreamLevel {
         clients,
-        shared_answers: after.shared,
+        shared_answers: after.shared.map(|s| s && own == 0.0),
         connected,
         refused: clients - connected,
         updates: updates as u64,
@@ -247,7 +254,7 @@ pub async fn level(cfg: &StreamStressConfig, clients: usize) -> Result<StreamLev
         update_p50_s: before.quantile_to(&after, 0.5),
         update_p99_s: before.quantile_to(&after, 0.99),
         ping_s: Series::of(&pings),
-        lists_computed: (after.misses - before.misses).max(0.0) as u64,
+        lists_computed: ((after.misses - before.misses).max(0.0) + own) as u64,
         lists_taken: (after.answers - before.answers).max(0.0) as u64,
         rss_open: after.rss,
         rss_idle: idle.rss,
@@ -375,7 +382,7 @@ mod tests {
     use super::*;
 
     const PAGE: &str = "# HELP x\nprocess_cpu_seconds_total 12.5\nprocess_resident_memory_bytes 1000\n\
-portico_stream_updates_total 40\nportico_shared_misses_total 3\n\
+portico_stream_updates_total 40\nportico_shared_misses_total 3\nportico_stream_own_lists_total 7\n\
 portico_stream_update_seconds_bucket{le=\"0.0001\"} 30\n\
 portico_stream_update_seconds_bucket{le=\"0.01\"} 39\n\
 portico_stream_update_seconds_bucket{le=\"+Inf\"} 40\n";
@@ -386,6 +393,7 @@ portico_stream_update_seconds_bucket{le=\"+Inf\"} 40\n";
         assert_eq!(a.cpu_s, 12.5);
         assert_eq!(a.updates, 40.0);
         assert_eq!(a.misses, 3.0);
+        assert_eq!(a.own_lists, 7.0);
         assert_eq!(a.buckets.len(), 3);
         let mut b = a.clone();
         // 100 more updates: 50 fast, 49 under 10 ms, 1 slower.
