@@ -6,7 +6,7 @@ use axum::body::{Body, Bytes};
 use axum::extract::Request;
 use axum::response::Response;
 use portico_client::elision::Algorithm;
-use portico_data::path::{PathKind, generate};
+use portico_data::path::{CameraPath, PathKind, generate};
 use portico_native::walk::{WalkConfig, walk};
 use portico_protocol::Policy;
 use std::collections::HashMap;
@@ -104,6 +104,18 @@ async fn forward(
     resp.body(Body::from(Bytes::from(bytes))).unwrap()
 }
 
+/// The tour's first view held for a minute. A walking observer under the predicted lookahead
+/// may stop needing a segment it read ahead, and a rejected segment is asked for again only
+/// while a list still wants it (`client/src/schedule.rs`): standing, every segment read stays
+/// wanted, so each damaged one must come again.
+fn standing(mut path: CameraPath) -> CameraPath {
+    let first = path.keyframes[0];
+    let mut later = first;
+    later.t = 60.0;
+    path.keyframes = vec![first, later];
+    path
+}
+
 #[test]
 fn damaged_segments_are_rejected_counted_and_fetched_again() {
     let dir = tempfile::tempdir().unwrap();
@@ -117,7 +129,7 @@ fn damaged_segments_are_rejected_counted_and_fetched_again() {
     let cfg = WalkConfig {
         server: proxy,
         token: None,
-        path: generate(&graph, PathKind::Tour, 2, 1, 1.5, 1.5).unwrap(),
+        path: standing(generate(&graph, PathKind::Tour, 2, 1, 1.5, 1.5).unwrap()),
         budget_s: 0.02,
         cache_bytes: 64 << 20,
         size: (96, 72),

@@ -14,6 +14,61 @@ use tokio_tungstenite::tungstenite::Message;
 mod common;
 use common::{request, start};
 
+/// The documents every client fetches first go out gzip-coded to clients that accept it (made
+/// once at start-up), decode to the same bytes, and carry their own ETag and `Vary`.
+#[tokio::test]
+async fn manifest_and_cells_are_gzip_coded_for_clients_that_accept_it() {
+    use std::io::Read;
+    let s = start(Config::default()).await;
+    // No automatic decoding: the test sees the bytes on the wire.
+    let http = reqwest::Client::builder().no_gzip().build().unwrap();
+    for path in ["/v1/manifest", "/v1/cells"] {
+        let get = |coding: Option<&'static str>| {
+            let mut r = http
+                .get(format!("{}{path}", s.base))
+                .header("accept", BINCODE_MIME);
+            if let Some(c) = coding {
+                r = r.header("accept-encoding", c);
+            }
+            r.send()
+        };
+        let plain = get(None).await.unwrap();
+        assert_eq!(plain.headers().get("content-encoding"), None, "{path}");
+        let plain_tag = plain.headers()["etag"].to_str().unwrap().to_string();
+        let plain = plain.bytes().await.unwrap();
+        let gz = get(Some("br;q=1, gzip;q=0.8")).await.unwrap();
+        assert_eq!(gz.headers()["content-encoding"], "gzip", "{path}");
+        assert_eq!(gz.headers()["vary"], "accept, accept-encoding", "{path}");
+        let gz_tag = gz.headers()["etag"].to_str().unwrap().to_string();
+        assert_ne!(gz_tag, plain_tag, "{path}: two codings share an ETag");
+        let wire = gz.bytes().await.unwrap();
+        let mut back = Vec::new();
+        flate2::read::GzDecoder::new(&wire[..])
+            .read_to_end(&mut back)
+            .unwrap();
+        assert_eq!(back, plain, "{path}");
+        assert!(
+            wire.len() * 2 < plain.len(),
+            "{path}: {} bytes gzip-coded of {}",
+            wire.len(),
+            plain.len()
+        );
+        // A client that refuses gzip gets the plain bytes.
+        let no = get(Some("gzip;q=0")).await.unwrap();
+        assert_eq!(no.headers().get("content-encoding"), None, "{path}");
+        // Conditional requests revalidate per coding.
+        let r = http
+            .get(format!("{}{path}", s.base))
+            .header("accept", BINCODE_MIME)
+            .header("accept-encoding", "gzip")
+            .header("if-none-match", &gz_tag)
+            .send()
+            .await
+            .unwrap();
+        assert_eq!(r.status(), 304, "{path}");
+    }
+}
+
 #[tokio::test]
 async fn manifest_cells_and_segments_are_served_from_the_map() {
     let s = start(Config::default()).await;
@@ -408,8 +463,11 @@ async fn the_stream_pushes_needed_segments_and_survives_vanishing_clients() {
         other => panic!("max_sessions = 1, yet a second session: {other:?}"),
     }
     let db = s.state.db();
-    let req = request(db);
-    // The session pushes its place's shared need list (the eye cell and direction bucket's).
+    let mut req = request(db);
+    // Under the range lookahead (the predicted one is each observer's own, pushed by deadline:
+    // tests/stream.rs) the session pushes its place's shared need list (the eye cell and
+    // direction bucket's).
+    req.policy.lookahead_cull = portico_protocol::LookaheadCull::Any;
     let p = &s.state.prefetcher;
     let key = p.share_key(&req.observer, &req.policy).expect("cells");
     let expected = p
