@@ -201,7 +201,8 @@ fn three_replicas_behind_nginx_survive_losing_one() {
     // it, revalidated (no-cache) and marked as varying by encoding for nginx and CDNs.
     if viewer.is_some() {
         rt.block_on(async {
-            let http = reqwest::Client::new();
+            // No automatic decoding: the test sees the coding on the wire.
+            let http = reqwest::Client::builder().no_gzip().build().unwrap();
             let page = http.get(format!("{base}/")).send().await.unwrap();
             assert_eq!(page.status(), 200);
             assert_eq!(page.headers()["cache-control"], "no-cache");

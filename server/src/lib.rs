@@ -12,6 +12,7 @@
 
 pub mod compute;
 pub mod config;
+pub mod encoding;
 pub mod error;
 pub mod guard;
 pub mod listen;

@@ -3,6 +3,7 @@
 //! name the database they come from (`/v1/db/{database_id}/…`), so they are immutable and no
 //! cache anywhere can serve stale bytes after a rebuild.
 
+use crate::encoding::Precompressed;
 use crate::error::Error;
 use crate::state::AppState;
 use axum::body::{Body, Bytes};
@@ -73,50 +74,65 @@ fn encoded(bincode: bool, bytes: Bytes, etag: Option<&str>) -> Response {
 }
 
 /// `GET /v1/manifest`: the segment table and the model header. Short-lived: a rebuild changes it,
-/// so it is revalidated (`no-cache`, an ETag per encoding, 304).
+/// so it is revalidated (`no-cache`, an ETag per encoding and coding, 304); gzip-coded for
+/// clients that accept it.
 pub async fn manifest(State(s): Shared, headers: HeaderMap) -> Response {
     let b = wants_bincode(&headers);
-    let tag = format!("\"m-{}-{}\"", s.database_id, if b { "b" } else { "j" });
-    if not_modified(&headers, &tag) {
-        return revalidated(StatusCode::NOT_MODIFIED.into_response(), &tag);
-    }
-    let body = if b {
-        s.manifest_bincode.clone()
+    let doc = if b {
+        &s.manifest_bincode
     } else {
         s.manifest_json()
     };
-    revalidated(encoded(b, body, None), &tag)
+    document(&headers, b, doc, &format!("m-{}", s.database_id))
 }
 
 /// `GET /v1/cells`: the compact cell graph (cell boxes, portals, adjacency, k-D tree). Bincode
-/// clients get the stored segment bytes as they are. Revalidated like the manifest.
+/// clients get the stored segment bytes as they are (or gzip of them). Revalidated like the
+/// manifest.
 pub async fn cells(State(s): Shared, headers: HeaderMap) -> Result<Response, Error> {
-    let Some(c) = &s.db().header().cells else {
+    let Some(stored) = &s.cells_bincode else {
         return Err(Error::not_found(
             "this database has no cells (built with --no-cells)",
         ));
     };
     let b = wants_bincode(&headers);
-    let tag = format!("\"c-{}-{}\"", s.database_id, if b { "b" } else { "j" });
-    if not_modified(&headers, &tag) {
-        return Ok(revalidated(StatusCode::NOT_MODIFIED.into_response(), &tag));
-    }
-    let body = if b {
-        s.db().segment(c.graph_segment)?
-    } else {
-        s.cells_json()
-    };
-    Ok(revalidated(encoded(b, body, None), &tag))
+    let doc = if b { stored } else { s.cells_json() };
+    Ok(document(&headers, b, doc, &format!("c-{}", s.database_id)))
 }
 
-/// Adds a (quoted) ETag and `no-cache`, and `Vary: Accept` (the encoding depends on it).
+/// A revalidated document (the manifest, the cell graph) in the coding the client accepts: gzip
+/// when `Accept-Encoding` allows it, made once at start-up ([`Precompressed`]). Each encoding
+/// and coding is its own representation with its own strong ETag (`"{name}-b-gzip"`).
+fn document(headers: &HeaderMap, bincode: bool, doc: &Precompressed, name: &str) -> Response {
+    let (body, coding) = doc.pick(headers);
+    let tag = format!(
+        "\"{name}-{}{}\"",
+        if bincode { "b" } else { "j" },
+        coding.map_or(String::new(), |c| format!("-{c}"))
+    );
+    if not_modified(headers, &tag) {
+        return revalidated(StatusCode::NOT_MODIFIED.into_response(), &tag);
+    }
+    let mut r = revalidated(encoded(bincode, body, None), &tag);
+    if let Some(c) = coding {
+        r.headers_mut()
+            .insert(header::CONTENT_ENCODING, HeaderValue::from_static(c));
+    }
+    r
+}
+
+/// Adds a (quoted) ETag and `no-cache`, and `Vary: Accept, Accept-Encoding` (the encoding and
+/// the content coding depend on them).
 fn revalidated(mut r: Response, tag: &str) -> Response {
     if let Ok(v) = HeaderValue::from_str(tag) {
         r.headers_mut().insert(header::ETAG, v);
     }
     let h = r.headers_mut();
     h.insert(header::CACHE_CONTROL, HeaderValue::from_static(REVALIDATE));
-    h.insert(header::VARY, HeaderValue::from_static("accept"));
+    h.insert(
+        header::VARY,
+        HeaderValue::from_static("accept, accept-encoding"),
+    );
     r
 }
 

@@ -3,6 +3,7 @@
 
 use crate::compute::Compute;
 use crate::config::Config;
+use crate::encoding::Precompressed;
 use crate::metrics::Metrics;
 use bytes::Bytes;
 use portico_data::prefetch::Prefetcher;
@@ -23,12 +24,14 @@ pub struct AppState {
     pub metrics: Metrics,
     /// Strong identifier of the file's contents (the manifest's ETag).
     pub database_id: String,
-    /// The manifest, bincode-encoded once at start-up.
-    pub manifest_bincode: Bytes,
+    /// The manifest, bincode-encoded and gzip-compressed once at start-up.
+    pub manifest_bincode: Precompressed,
+    /// The stored cell graph segment and its gzip coding, when the model has cells.
+    pub cells_bincode: Option<Precompressed>,
     /// Each segment's strong ETag (its xxh3, quoted), made once at start-up.
     pub etags: Vec<axum::http::HeaderValue>,
-    manifest_json: OnceLock<Bytes>,
-    cells_json: OnceLock<Bytes>,
+    manifest_json: OnceLock<Precompressed>,
+    cells_json: OnceLock<Precompressed>,
     /// One permit per allowed stream session.
     pub sessions: Arc<Semaphore>,
     /// Flips to `true` when the server shuts down; stream sessions watch it and close.
@@ -56,8 +59,12 @@ impl AppState {
         let database_id = format!("{:016x}{:016x}", p.header_checksum, p.index_checksum);
         let manifest = manifest(&db, &database_id);
         let manifest_bincode = portico_protocol::to_bincode(&manifest)
-            .map(Bytes::from)
+            .map(|b| Precompressed::new(Bytes::from(b)))
             .map_err(|e| DataError::NotFound(format!("manifest does not encode: {e}")))?;
+        let cells_bincode = match &db.header().cells {
+            Some(c) => Some(Precompressed::new(db.segment(c.graph_segment)?)),
+            None => None,
+        };
         let sessions = Arc::new(Semaphore::new(config.max_sessions));
         let etags = db
             .segments()
@@ -79,6 +86,7 @@ impl AppState {
             metrics: Metrics::default(),
             database_id,
             manifest_bincode,
+            cells_bincode,
             manifest_json: OnceLock::new(),
             cells_json: OnceLock::new(),
             sessions,
@@ -91,23 +99,23 @@ impl AppState {
         self.prefetcher.database()
     }
 
-    /// The manifest as JSON (encoded on first use: it is large for big models).
-    pub fn manifest_json(&self) -> Bytes {
-        self.manifest_json
-            .get_or_init(|| {
-                let m = manifest(self.db(), &self.database_id);
-                Bytes::from(serde_json::to_vec(&m).unwrap_or_default())
-            })
-            .clone()
+    /// The manifest as JSON, with its gzip coding (encoded on first use: it is large for big
+    /// models).
+    pub fn manifest_json(&self) -> &Precompressed {
+        self.manifest_json.get_or_init(|| {
+            let m = manifest(self.db(), &self.database_id);
+            Precompressed::new(Bytes::from(serde_json::to_vec(&m).unwrap_or_default()))
+        })
     }
 
-    /// The cell graph as JSON (bincode clients get the stored segment bytes unchanged).
-    pub fn cells_json(&self) -> Bytes {
-        self.cells_json
-            .get_or_init(|| {
-                Bytes::from(serde_json::to_vec(&self.prefetcher.graph()).unwrap_or_default())
-            })
-            .clone()
+    /// The cell graph as JSON, with its gzip coding (bincode clients get the stored segment
+    /// bytes unchanged, or their gzip coding: [`AppState::cells_bincode`]).
+    pub fn cells_json(&self) -> &Precompressed {
+        self.cells_json.get_or_init(|| {
+            Precompressed::new(Bytes::from(
+                serde_json::to_vec(&self.prefetcher.graph()).unwrap_or_default(),
+            ))
+        })
     }
 }
 

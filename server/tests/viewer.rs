@@ -32,7 +32,8 @@ async fn the_viewer_is_served_at_the_root() {
         ..Config::default()
     })
     .await;
-    let http = reqwest::Client::new();
+    // No automatic decoding: the test sees the bytes and codings on the wire.
+    let http = reqwest::Client::builder().no_gzip().build().unwrap();
     let page = http.get(format!("{}/", s.base)).send().await.unwrap();
     assert_eq!(page.status(), 200);
     assert!(

@@ -170,12 +170,15 @@ pub fn run(a: Args) -> Result<()> {
 /// Says what is served where.
 fn announce(state: &AppState, addr: SocketAddr) {
     let db = state.db();
+    let m = &state.manifest_bincode;
     eprintln!(
-        "serving {} ({} segments, {:.1} MB, id {}) on http://{addr}",
+        "serving {} ({} segments, {:.1} MB, id {}; manifest {:.2} MB, {:.2} MB gzip-coded) on http://{addr}",
         db.header().name,
         db.segments().len(),
         db.file_len() as f64 / 1e6,
-        state.database_id
+        state.database_id,
+        m.identity.len() as f64 / 1e6,
+        m.gzip.len() as f64 / 1e6,
     );
 }
 
