@@ -49,23 +49,26 @@ impl Precompressed {
 /// Without the header only the identity coding is assumed (RFC 9110 allows any, but a client
 /// that sends nothing may not decode).
 pub fn accepts_gzip(headers: &HeaderMap) -> bool {
-    let Some(v) = headers
-        .get(header::ACCEPT_ENCODING)
-        .and_then(|v| v.to_str().ok())
-    else {
-        return false;
-    };
-    let mut gzip = None;
+    let mut gzip: Option<bool> = None;
     let mut any = None;
-    for item in v.split(',') {
+    // Every Accept-Encoding line, each a comma-separated list (RFC 9110 §5.3).
+    let lines = headers
+        .get_all(header::ACCEPT_ENCODING)
+        .iter()
+        .filter_map(|v| v.to_str().ok());
+    for item in lines.flat_map(|v| v.split(',')) {
         let mut parts = item.split(';');
         let coding = parts.next().unwrap_or("").trim().to_ascii_lowercase();
         let q = parts
-            .filter_map(|p| p.trim().strip_prefix("q="))
+            .filter_map(|p| {
+                let (k, v) = p.split_once('=')?;
+                k.trim().eq_ignore_ascii_case("q").then_some(v)
+            })
             .find_map(|q| q.trim().parse::<f32>().ok())
             .unwrap_or(1.0);
         match coding.as_str() {
-            "gzip" | "x-gzip" => gzip = Some(q > 0.0),
+            // `x-gzip` is gzip: either listed with a weight above zero allows it.
+            "gzip" | "x-gzip" => gzip = Some(gzip.unwrap_or(false) || q > 0.0),
             "*" => any = Some(q > 0.0),
             _ => {}
         }
@@ -95,6 +98,13 @@ mod tests {
         assert!(!accepts_gzip(&with("br, deflate")));
         assert!(!accepts_gzip(&with("identity")));
         assert!(!accepts_gzip(&HeaderMap::new()));
+        // The weight's name is case-insensitive.
+        assert!(!accepts_gzip(&with("gzip;Q=0")));
+        assert!(accepts_gzip(&with("x-gzip;q=0, gzip")));
+        // Several header lines are one list.
+        let mut h = with("br");
+        h.append(header::ACCEPT_ENCODING, "gzip".parse().unwrap());
+        assert!(accepts_gzip(&h));
     }
 
     #[test]

@@ -81,6 +81,12 @@ pub async fn manifest(State(s): Shared, headers: HeaderMap) -> Response {
     let doc = if b {
         &s.manifest_bincode
     } else {
+        // Encoded and compressed on first use, off the async workers (seconds on a big model).
+        let first = s.clone();
+        let _ = tokio::task::spawn_blocking(move || {
+            first.manifest_json();
+        })
+        .await;
         s.manifest_json()
     };
     document(&headers, b, doc, &format!("m-{}", s.database_id))
@@ -96,12 +102,22 @@ pub async fn cells(State(s): Shared, headers: HeaderMap) -> Result<Response, Err
         ));
     };
     let b = wants_bincode(&headers);
-    let doc = if b { stored } else { s.cells_json() };
+    let doc = if b {
+        stored
+    } else {
+        let first = s.clone();
+        let _ = tokio::task::spawn_blocking(move || {
+            first.cells_json();
+        })
+        .await;
+        s.cells_json()
+    };
     Ok(document(&headers, b, doc, &format!("c-{}", s.database_id)))
 }
 
 /// A revalidated document (the manifest, the cell graph) in the coding the client accepts: gzip
-/// when `Accept-Encoding` allows it, made once at start-up ([`Precompressed`]). Each encoding
+/// when `Accept-Encoding` allows it, made once ([`Precompressed`]: the bincode documents at
+/// start-up, the JSON ones on first use). Each encoding
 /// and coding is its own representation with its own strong ETag (`"{name}-b-gzip"`).
 fn document(headers: &HeaderMap, bincode: bool, doc: &Precompressed, name: &str) -> Response {
     let (body, coding) = doc.pick(headers);

@@ -66,6 +66,23 @@ async fn manifest_and_cells_are_gzip_coded_for_clients_that_accept_it() {
             .await
             .unwrap();
         assert_eq!(r.status(), 304, "{path}");
+        assert_eq!(r.headers()["etag"], gz_tag.as_str(), "{path}");
+        assert_eq!(r.headers()["vary"], "accept, accept-encoding", "{path}");
+        // The plain tag revalidates the plain coding, and not the gzip one.
+        for (coding, status) in [(None, 304), (Some("gzip"), 200)] {
+            let mut r = http
+                .get(format!("{}{path}", s.base))
+                .header("accept", BINCODE_MIME)
+                .header("if-none-match", &plain_tag);
+            if let Some(c) = coding {
+                r = r.header("accept-encoding", c);
+            }
+            assert_eq!(
+                r.send().await.unwrap().status(),
+                status,
+                "{path} {coding:?}"
+            );
+        }
     }
 }
 
