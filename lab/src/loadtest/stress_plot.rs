@@ -18,9 +18,14 @@ type Points = Vec<(f64, f64)>;
 /// A named line and its colour's index in [`PALETTE`].
 type Line = (String, Points, usize);
 
-/// The name of a run in the legend: what its server said about sharing.
+/// The name of a run in the legend: what its server said about sharing, and whether the
+/// sessions computed their own lists anyway (the predicted lookahead) for most of those taken.
 pub fn run_name(levels: &[StreamLevel]) -> &'static str {
-    match levels.first().and_then(|l| l.shared_answers) {
+    let Some(l) = levels.first() else {
+        return "server";
+    };
+    match l.shared_answers {
+        Some(true) if l.own_lists * 2 > l.lists_taken => "own lists",
         Some(true) => "shared lists",
         Some(false) => "exact lists",
         None => "server",
@@ -206,6 +211,7 @@ mod tests {
             update_p99_s: if shared { 1e-4 } else { 0.5 },
             ping_s: Series::of(&[0.001, 0.002]),
             lists_computed: 1,
+            own_lists: 0,
             lists_taken: 2,
             rss_open: 0.0,
             rss_idle: 0.0,
@@ -220,6 +226,9 @@ mod tests {
         let before = [level(1, false, 1.0), level(1000, false, 0.06)];
         assert_eq!(run_name(&after), "shared lists");
         assert_eq!(run_name(&before), "exact lists");
+        let mut own = level(1, true, 0.1);
+        own.own_lists = own.lists_taken;
+        assert_eq!(run_name(&[own]), "own lists");
         let p = dir.path().join("scaling.png");
         scaling(&p, &[("shared lists", &after), ("exact lists", &before)]).unwrap();
         let img = image::open(&p).unwrap().to_rgb8();

@@ -50,9 +50,8 @@ pub struct StreamStressConfig {
 pub struct StreamLevel {
     /// Sessions asked for.
     pub clients: usize,
-    /// Whether the sessions' need lists were shared (`None`: the server did not say): the
-    /// server shares them, and the policy allows it (a predicted lookahead is each observer's
-    /// own).
+    /// Whether the server shares need lists by place (`None`: it did not say); a policy may
+    /// still have each session compute its own (`own_lists`).
     #[serde(default)]
     pub shared_answers: Option<bool>,
     /// Sessions the server accepted.
@@ -76,9 +75,13 @@ pub struct StreamLevel {
     pub update_p99_s: f64,
     /// Ping round trips after each update, at the clients (s).
     pub ping_s: Series,
-    /// Need lists the server computed in the window (shared-cache misses, and the lists
-    /// sessions computed for their own observer).
+    /// Need lists the server computed in the window (shared-cache misses, and `own_lists`).
     pub lists_computed: u64,
+    /// Of those, the lists sessions computed for their own observer, shared with nobody: all
+    /// of them under the predicted lookahead, an eye outside the live cells under the range
+    /// lookahead (0 from a server before this counter).
+    #[serde(default)]
+    pub own_lists: u64,
     /// Need lists the sessions changed to in the window (a change of place: from the shared
     /// cache or computed; with exact answers, one per update served).
     pub lists_taken: u64,
@@ -239,7 +242,7 @@ pub async fn level(cfg: &StreamStressConfig, clients: usize) -> Result<StreamLev
     let own = (after.own_lists - before.own_lists).max(0.0);
     Ok(StreamLevel {
         clients,
-        shared_answers: after.shared.map(|s| s && own == 0.0),
+        shared_answers: after.shared,
         connected,
         refused: clients - connected,
         updates: updates as u64,
@@ -255,6 +258,7 @@ pub async fn level(cfg: &StreamStressConfig, clients: usize) -> Result<StreamLev
         update_p99_s: before.quantile_to(&after, 0.99),
         ping_s: Series::of(&pings),
         lists_computed: ((after.misses - before.misses).max(0.0) + own) as u64,
+        own_lists: own as u64,
         lists_taken: (after.answers - before.answers).max(0.0) as u64,
         rss_open: after.rss,
         rss_idle: idle.rss,
@@ -421,6 +425,7 @@ portico_stream_update_seconds_bucket{le=\"+Inf\"} 40\n";
             update_p99_s: 0.0,
             ping_s: Series::of(&[]),
             lists_computed: 0,
+            own_lists: 0,
             lists_taken: 0,
             rss_open: open,
             rss_idle: idle,
