@@ -1,8 +1,8 @@
 //! Content coding for the large documents every client fetches before its first frame (the
-//! manifest and the cell graph): each is gzip-compressed once when the file is opened, as
-//! nginx's `gzip_static` serves a `.gz` beside a file, and sent compressed to clients whose
-//! `Accept-Encoding` allows it (RFC 9110 §12.5.3). Compressing per request would hand every
-//! client seconds of server CPU on a large model.
+//! manifest and the cell graph): each is gzip-compressed once (bincode when the file is
+//! opened, JSON on first use), as nginx's `gzip_static` serves a `.gz` beside a file, and sent
+//! so to clients whose `Accept-Encoding` allows it (RFC 9110 §12.5.3). Compressing per request
+//! would hand every client seconds of server CPU on a large model.
 
 use axum::http::{HeaderMap, header};
 use bytes::Bytes;
