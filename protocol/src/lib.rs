@@ -8,8 +8,10 @@
 pub mod batch;
 pub mod hex;
 mod messages;
+mod paged;
 
 pub use messages::*;
+pub use paged::*;
 use serde::{Serialize, de::DeserializeOwned};
 
 /// Version of the wire types in this crate.

@@ -270,6 +270,9 @@ pub enum StreamClient {
     /// list, which the server made for an observer that may have moved on or mispredicted.
     /// Replaces the previous one; empty clears it. At most [`MAX_LACKING`] ids.
     Lacking(Vec<u32>),
+    /// The client started from the [`crate::CoreManifest`]: from now on the server sends each
+    /// cell's [`crate::Page`] (a [`crate::FRAME_PAGE`]) before that cell's stab list, once.
+    Pages,
 }
 
 /// Most segment ids in one [`StreamClient::Lacking`].
@@ -307,6 +310,8 @@ pub enum ServerFrame<'a> {
     Segment(u32, &'a [u8]),
     /// A control message.
     Control(StreamServer),
+    /// A cell's page, deflated ([`crate::inflate_page`]).
+    Page(&'a [u8]),
 }
 
 /// Decodes a binary frame from the server.
@@ -317,6 +322,7 @@ pub fn parse_server_frame(frame: &[u8]) -> Result<ServerFrame<'_>, crate::CodecE
             Ok(ServerFrame::Segment(id, &rest[4..]))
         }
         Some((&FRAME_CONTROL, rest)) => Ok(ServerFrame::Control(crate::from_bincode(rest)?)),
+        Some((&crate::FRAME_PAGE, rest)) => Ok(ServerFrame::Page(rest)),
         _ => Err(crate::CodecError::Bincode("unknown frame tag".into())),
     }
 }

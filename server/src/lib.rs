@@ -17,6 +17,7 @@ pub mod error;
 pub mod guard;
 pub mod listen;
 pub mod metrics;
+pub mod paged;
 pub mod process;
 pub mod routes;
 pub mod state;
@@ -47,6 +48,8 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/db/{db}/prefetch", post(routes::prefetch_in))
         .layer(timeout)
         .route("/v1/manifest", get(routes::manifest))
+        .route("/v1/manifest/core", get(paged::core))
+        .route("/v1/db/{db}/pages/{cell}", get(paged::page))
         .route("/v1/cells", get(routes::cells))
         .route("/v1/db/{db}/segments/{id}", get(routes::segment_in))
         .route("/v1/db/{db}/batch", get(routes::batch_in))

@@ -119,7 +119,12 @@ pub async fn cells(State(s): Shared, headers: HeaderMap) -> Result<Response, Err
 /// when `Accept-Encoding` allows it, made once ([`Precompressed`]: the bincode documents at
 /// start-up, the JSON ones on first use). Each encoding
 /// and coding is its own representation with its own strong ETag (`"{name}-b-gzip"`).
-fn document(headers: &HeaderMap, bincode: bool, doc: &Precompressed, name: &str) -> Response {
+pub(crate) fn document(
+    headers: &HeaderMap,
+    bincode: bool,
+    doc: &Precompressed,
+    name: &str,
+) -> Response {
     let (body, coding) = doc.pick(headers);
     let tag = format!(
         "\"{name}-{}{}\"",
@@ -139,7 +144,7 @@ fn document(headers: &HeaderMap, bincode: bool, doc: &Precompressed, name: &str)
 
 /// Adds a (quoted) ETag and `no-cache`, and `Vary: Accept, Accept-Encoding` (the encoding and
 /// the content coding depend on them).
-fn revalidated(mut r: Response, tag: &str) -> Response {
+pub(crate) fn revalidated(mut r: Response, tag: &str) -> Response {
     if let Ok(v) = HeaderValue::from_str(tag) {
         r.headers_mut().insert(header::ETAG, v);
     }
@@ -154,7 +159,7 @@ fn revalidated(mut r: Response, tag: &str) -> Response {
 
 /// Checks that a content-named URL names the database being served: a client or cache still
 /// on a rebuilt file's URLs gets 410 Gone, never another file's bytes.
-fn current(s: &AppState, db: &str) -> Result<(), Error> {
+pub(crate) fn current(s: &AppState, db: &str) -> Result<(), Error> {
     if db == s.database_id {
         return Ok(());
     }

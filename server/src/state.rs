@@ -26,6 +26,12 @@ pub struct AppState {
     pub database_id: String,
     /// The manifest, bincode-encoded and gzip-compressed once at start-up.
     pub manifest_bincode: Precompressed,
+    /// The paged manifest's core ([`crate::paged`]), bincode and gzip, made at start-up.
+    pub core_bincode: Precompressed,
+    /// Cells' pages made so far ([`crate::paged`]).
+    pub pages: crate::paged::Pages,
+    /// The cell of each stab list segment.
+    pub stab_cells: std::collections::HashMap<u32, u32>,
     /// The stored cell graph segment and its gzip coding, when the model has cells.
     pub cells_bincode: Option<Precompressed>,
     /// Each segment's strong ETag (its xxh3, quoted), made once at start-up.
@@ -61,6 +67,17 @@ impl AppState {
         let manifest_bincode = portico_protocol::to_bincode(&manifest)
             .map(|b| Precompressed::new(Bytes::from(b)))
             .map_err(|e| DataError::NotFound(format!("manifest does not encode: {e}")))?;
+        let core_bincode = crate::paged::core_bincode(&db, &database_id)
+            .map(|b| Precompressed::new(Bytes::from(b)))
+            .map_err(|e| DataError::NotFound(format!("core manifest does not encode: {e}")))?;
+        let stab_cells = db
+            .header()
+            .cells
+            .iter()
+            .flat_map(|c| c.stab_segments.iter().enumerate())
+            .filter(|(_, s)| **s != u32::MAX)
+            .map(|(cell, &s)| (s, cell as u32))
+            .collect();
         let cells_bincode = match &db.header().cells {
             Some(c) => Some(Precompressed::new(db.segment(c.graph_segment)?)),
             None => None,
@@ -86,6 +103,9 @@ impl AppState {
             metrics: Metrics::default(),
             database_id,
             manifest_bincode,
+            core_bincode,
+            pages: Default::default(),
+            stab_cells,
             cells_bincode,
             manifest_json: OnceLock::new(),
             cells_json: OnceLock::new(),

@@ -125,6 +125,13 @@ struct Session {
     recheck: Instant,
     /// The latest observer not yet served (older ones are dropped: only the latest matters).
     pending: Option<Pending>,
+    /// Whether the client started from the core manifest ([`StreamClient::Pages`]): each
+    /// cell's page goes before its stab list.
+    paged: bool,
+    /// Cells whose page was sent.
+    pages_sent: HashSet<u32>,
+    /// A stab list whose page went first: it is pushed next.
+    after_page: Option<u32>,
 }
 
 impl Session {
@@ -149,6 +156,9 @@ impl Session {
             next_free: Instant::now(),
             recheck: Instant::now(),
             pending: None,
+            paged: false,
+            pages_sent: HashSet::new(),
+            after_page: None,
         }
     }
 
@@ -168,8 +178,9 @@ impl Session {
             {
                 computing = Some((self.compute(p.obs, p.place), p));
             }
-            let pending =
-                self.cursor < self.list.items.len() || self.lacking_at < self.lacking.len();
+            let pending = self.after_page.is_some()
+                || self.cursor < self.list.items.len()
+                || self.lacking_at < self.lacking.len();
             let push_at = pending.then_some(self.next_free.max(self.recheck));
             let outgoing = tokio::select! {
                 msg = rx.next() => {
@@ -284,6 +295,10 @@ impl Session {
                 }
                 Ok(None)
             }
+            Ok(StreamClient::Pages) => {
+                self.paged = true;
+                Ok(None)
+            }
             Ok(StreamClient::Lacking(ids)) => {
                 let n = self.state.db().segments().len();
                 if ids.len() > MAX_LACKING {
@@ -396,22 +411,43 @@ impl Session {
 
     /// The next segment of the list the client lacks, as a frame (or an error for a segment
     /// that cannot be read), and the pacing clock advanced by its size.
+    /// A paged session gets a stab list's page first ([`crate::paged`]), then the stab list.
     fn next_push(&mut self) -> Option<Message> {
-        let segment = self.next_due(Instant::now())?;
+        let segment = match self.after_page.take() {
+            Some(s) => s,
+            None => self.next_due(Instant::now())?,
+        };
+        if self.paged
+            && let Some(&cell) = self.state.stab_cells.get(&segment)
+            && self.pages_sent.insert(cell)
+        {
+            let frame = match self.state.page(cell) {
+                Ok(p) => portico_protocol::deflate_page(&p.identity),
+                Err(e) => return Some(control(&StreamServer::Error(e.to_api()))),
+            };
+            self.after_page = Some(segment);
+            self.pace(frame.len());
+            return Some(Message::Binary(frame.into()));
+        }
         let bytes = match self.state.db().segment(segment) {
             Ok(b) => b,
             Err(e) => return Some(control(&StreamServer::Error(Error::from(e).to_api()))),
         };
         self.state.metrics.sent(bytes.len() as u64);
         self.mirror.insert(segment);
-        let cost = Duration::from_secs_f64(bytes.len() as f64 / self.rate as f64);
+        self.pace(bytes.len());
+        Some(Message::Binary(segment_frame(segment, &bytes).into()))
+    }
+
+    /// Advances the pacing clock by a frame of `len` bytes.
+    fn pace(&mut self, len: usize) {
+        let cost = Duration::from_secs_f64(len as f64 / self.rate as f64);
         // A token bucket PACING_BURST deep: a timer that wakes late (they tick in whole
         // milliseconds, longer than a small segment takes at a few MB/s) lets the next pushes
         // go at once rather than losing the time, which halved the rate on small segments.
         let now = Instant::now();
         let floor = now.checked_sub(PACING_BURST).unwrap_or(now);
         self.next_free = self.next_free.max(floor) + cost;
-        Some(Message::Binary(segment_frame(segment, &bytes).into()))
     }
 }
 

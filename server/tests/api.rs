@@ -522,6 +522,7 @@ async fn the_stream_pushes_needed_segments_and_survives_vanishing_clients() {
             ServerFrame::Control(StreamServer::Dropped(d)) => {
                 panic!("one observer, nothing to drop: {d:?}")
             }
+            ServerFrame::Page(_) => panic!("a page for a session that asked for none"),
         }
     }
     let want: Vec<u32> = expected.items.iter().map(|i| i.segment).collect();

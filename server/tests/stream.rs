@@ -68,6 +68,8 @@ enum Got {
     Segment(u32, usize),
     Dropped(Vec<u32>),
     Error(String),
+    /// A page's deflated bytes.
+    Page(Vec<u8>),
     Close,
 }
 
@@ -82,6 +84,7 @@ async fn next(ws: &mut Ws, wait: Duration) -> Option<Got> {
                         ServerFrame::Segment(id, bytes) => Got::Segment(id, bytes.len()),
                         ServerFrame::Control(StreamServer::Dropped(d)) => Got::Dropped(d),
                         ServerFrame::Control(StreamServer::Error(e)) => Got::Error(e.message),
+                        ServerFrame::Page(p) => Got::Page(p.to_vec()),
                     },
                 );
             }
@@ -98,6 +101,7 @@ async fn segments(ws: &mut Ws, want: usize) -> Vec<(u32, usize)> {
             Some(Got::Segment(id, n)) => got.push((id, n)),
             Some(Got::Dropped(d)) => panic!("dropped {d:?} with one observer"),
             Some(Got::Error(e)) => panic!("error: {e}"),
+            Some(Got::Page(_)) => panic!("a page for a session that asked for none"),
             Some(Got::Close) => panic!("closed after {} of {want} segments", got.len()),
             None => panic!("only {} of {want} segments within 10 s", got.len()),
         }
@@ -456,4 +460,95 @@ async fn what_the_frame_lacked_is_pushed_first_and_a_bad_id_is_refused() {
     let first: Vec<u32> = got.iter().take(2).map(|&(id, _)| id).collect();
     assert_eq!(first, extra, "what the frame lacked comes first");
     assert!(list.segments.contains(&got[2].0), "then the list: {got:?}");
+}
+
+/// A session that started from the core manifest gets each stab list's page right before the
+/// list, once: the page names the list's segment, and every segment pushed after it has its
+/// row in a page that came before it (so the client can check it).
+#[tokio::test]
+async fn a_paged_session_gets_each_page_before_its_stab_list_once() {
+    use portico_data::format::InstanceRecord;
+    let s = start(Config::default()).await;
+    let db = s.state.db();
+    let req = request(db);
+    let list = need_list(&s.state, &req.observer, &req.policy);
+    let stabs: HashSet<u32> = db
+        .header()
+        .cells
+        .as_ref()
+        .unwrap()
+        .stab_segments
+        .iter()
+        .copied()
+        .collect();
+    let listed_stabs = list
+        .items
+        .iter()
+        .filter(|i| stabs.contains(&i.segment))
+        .count();
+    assert!(listed_stabs >= 2, "the list has {listed_stabs} stab lists");
+    let mut ws = connect(&s.base).await;
+    hello(&mut ws, req.policy, 1 << 30).await;
+    ws.send(binary(&StreamClient::Pages)).await.unwrap();
+    let observe = binary(&StreamClient::Observer(req.observer));
+    ws.send(observe.clone()).await.unwrap();
+    let mut rows = std::collections::HashMap::new();
+    let mut page_for: Option<u32> = None;
+    let (mut segments_got, mut pages) = (0, 0);
+    while segments_got < list.items.len() {
+        match next(&mut ws, Duration::from_secs(10)).await {
+            Some(Got::Page(deflated)) => {
+                assert!(page_for.is_none(), "two pages in a row");
+                let page: portico_protocol::Page<InstanceRecord> =
+                    portico_protocol::inflate_page(&deflated).unwrap();
+                rows.extend(page.segments.iter().copied());
+                rows.insert(page.stab.0, page.stab.1);
+                page_for = Some(page.stab.0);
+                pages += 1;
+            }
+            Some(Got::Segment(id, n)) => {
+                segments_got += 1;
+                if stabs.contains(&id) {
+                    assert_eq!(
+                        page_for.take(),
+                        Some(id),
+                        "stab list {id} without its page first"
+                    );
+                } else {
+                    assert!(
+                        page_for.is_none(),
+                        "a page, then segment {id} that is no stab list"
+                    );
+                }
+                let row = rows
+                    .get(&id)
+                    .unwrap_or_else(|| panic!("segment {id} before any row of it"));
+                let e = db.segments()[id as usize];
+                assert_eq!(
+                    (row.bytes, row.checksum, n as u64),
+                    (e.length, e.checksum, e.length)
+                );
+            }
+            other => panic!(
+                "{other:?} after {segments_got} of {} segments",
+                list.items.len()
+            ),
+        }
+    }
+    assert_eq!(pages, listed_stabs, "one page per stab list pushed");
+    // Evicted and pushed again, a stab list comes without its page: the client has it.
+    let stab = list
+        .items
+        .iter()
+        .find(|i| stabs.contains(&i.segment))
+        .unwrap()
+        .segment;
+    ws.send(binary(&StreamClient::Evicted(vec![stab])))
+        .await
+        .unwrap();
+    ws.send(observe).await.unwrap();
+    match next(&mut ws, Duration::from_secs(10)).await {
+        Some(Got::Segment(id, _)) => assert_eq!(id, stab),
+        other => panic!("{other:?} instead of stab list {stab} alone"),
+    }
 }

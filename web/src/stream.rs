@@ -107,6 +107,10 @@ impl Stream {
             let pushed = match parse_server_frame(&bytes) {
                 Ok(ServerFrame::Segment(id, b)) => Pushed::Segment(id, b.to_vec()),
                 Ok(ServerFrame::Control(StreamServer::Dropped(_))) => return,
+                // This client reads the whole manifest and never asks for pages.
+                Ok(ServerFrame::Page(_)) => {
+                    Pushed::Error("stream: a page came unasked for".to_string())
+                }
                 Ok(ServerFrame::Control(StreamServer::Error(e))) => {
                     Pushed::Error(format!("stream: {}: {}", e.code, e.message))
                 }

@@ -15,12 +15,14 @@
 //! ([`reader`]), so a truncated, corrupt or foreign file is a clear error, never a panic.
 
 mod header;
+mod paged;
 #[cfg(feature = "native")]
 pub mod reader;
 #[cfg(feature = "native")]
 pub mod writer;
 
 pub use header::{CellIndex, Header, InstanceRecord, LodRecord, ObjectRecord};
+pub use paged::{UNKNOWN_ROW, take_rows};
 
 use bytemuck::{Pod, Zeroable};
 

@@ -1,0 +1,161 @@
+//! The paged manifest over HTTP: the core is the manifest less its instance and segment
+//! tables, each live cell's page is the part of them its stab list names (gzip-coded,
+//! immutable under the database id), and bad cells get one-line errors.
+
+use portico_data::format::{Header, InstanceRecord};
+use portico_protocol::{ApiError, BINCODE_MIME, CoreManifest, Manifest, Page};
+use portico_server::Config;
+
+mod common;
+use common::start;
+
+async fn get(http: &reqwest::Client, url: &str) -> reqwest::Response {
+    http.get(url)
+        .header("accept", BINCODE_MIME)
+        .send()
+        .await
+        .unwrap()
+}
+
+#[tokio::test]
+async fn the_core_and_the_pages_make_up_the_whole_manifest() {
+    let s = start(Config::default()).await;
+    let http = reqwest::Client::new();
+    let whole: Manifest<Header> = portico_protocol::manifest_from_bincode(
+        &get(&http, &format!("{}/v1/manifest", s.base))
+            .await
+            .bytes()
+            .await
+            .unwrap(),
+    )
+    .unwrap();
+    let r = get(&http, &format!("{}/v1/manifest/core", s.base)).await;
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["cache-control"], "no-cache");
+    let core_bytes = r.bytes().await.unwrap();
+    let core: CoreManifest<Header> = portico_protocol::from_bincode(&core_bytes).unwrap();
+    assert_eq!(core.database_id, whole.database_id);
+    assert_eq!(core.segment_count as usize, whole.segments.len());
+    assert_eq!(core.instance_count as usize, whole.header.instances.len());
+    assert_eq!(core.triangles, whole.header.finest_triangles());
+    assert_eq!(core.header, whole.header.core());
+    for (id, row) in &core.rows {
+        assert_eq!(*row, whole.segments[*id as usize], "core row {id}");
+    }
+    let cells = whole.header.cells.as_ref().unwrap();
+    assert!(core.rows.iter().any(|(id, _)| *id == cells.graph_segment));
+    let db = s.state.db();
+    let mut seen = std::collections::HashSet::new();
+    for (cell, &seg) in cells.stab_segments.iter().enumerate() {
+        if seg == u32::MAX {
+            continue;
+        }
+        let url = format!("{}/v1/db/{}/pages/{cell}", s.base, whole.database_id);
+        let r = get(&http, &url).await;
+        assert_eq!(r.status(), 200, "cell {cell}");
+        assert_eq!(
+            r.headers()["cache-control"],
+            portico_server::routes::IMMUTABLE
+        );
+        let page: Page<InstanceRecord> =
+            portico_protocol::from_bincode(&r.bytes().await.unwrap()).unwrap();
+        assert_eq!(page.cell, cell as u32);
+        assert_eq!(page.stab, (seg, whole.segments[seg as usize]));
+        let stab = db.stab_list(cell as u32).unwrap();
+        for o in stab.objects() {
+            assert!(
+                page.instances.iter().any(|(i, _)| *i == o),
+                "cell {cell}: {o} missing"
+            );
+        }
+        for (i, inst) in &page.instances {
+            assert_eq!(inst, &whole.header.instances[*i as usize]);
+            for l in whole.header.lods_of(inst) {
+                let row = page.segments.iter().find(|(s, _)| *s == l.segment);
+                assert_eq!(row.map(|r| r.1), Some(whole.segments[l.segment as usize]));
+            }
+            seen.insert(*i);
+        }
+    }
+    // The core is small beside the whole manifest, and the pages cover most of the model.
+    let whole_bytes = portico_protocol::to_bincode(&whole).unwrap().len();
+    assert!(
+        core_bytes.len() * 2 < whole_bytes,
+        "core {} of {whole_bytes}",
+        core_bytes.len()
+    );
+    assert!(seen.len() * 2 > whole.header.instances.len());
+}
+
+#[tokio::test]
+async fn pages_are_gzip_coded_and_bad_cells_get_one_line_errors() {
+    let s = start(Config::default()).await;
+    let http = reqwest::Client::builder().no_gzip().build().unwrap();
+    let db = s.state.db();
+    let cells = db.header().cells.as_ref().unwrap();
+    let live = cells
+        .stab_segments
+        .iter()
+        .position(|&s| s != u32::MAX)
+        .unwrap();
+    let id = &s.state.database_id;
+    let url = |cell: &str| format!("{}/v1/db/{id}/pages/{cell}", s.base);
+    let plain = get(&http, &url(&live.to_string())).await;
+    let tag = plain.headers()["etag"].to_str().unwrap().to_string();
+    let plain = plain.bytes().await.unwrap();
+    let gz = http
+        .get(url(&live.to_string()))
+        .header("accept", BINCODE_MIME)
+        .header("accept-encoding", "gzip")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(gz.headers()["content-encoding"], "gzip");
+    assert_ne!(gz.headers()["etag"].to_str().unwrap(), tag);
+    assert!(gz.bytes().await.unwrap().len() < plain.len());
+    let revalidated = http
+        .get(url(&live.to_string()))
+        .header("accept", BINCODE_MIME)
+        .header("if-none-match", &tag)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(revalidated.status(), 304);
+    let dead = cells.stab_segments.iter().position(|&s| s == u32::MAX);
+    let mut cases = vec![
+        (url("x9"), 400, "\"x9\" is not a number".to_string()),
+        (
+            url("4000000000"),
+            404,
+            "cell 4000000000 has no page".to_string(),
+        ),
+        (
+            format!("{}/v1/db/0000/pages/{live}", s.base),
+            410,
+            "database 0000 is no longer served".to_string(),
+        ),
+    ];
+    if let Some(d) = dead {
+        cases.push((url(&d.to_string()), 404, format!("cell {d} has no page")));
+    }
+    for (u, status, want) in cases {
+        let r = get(&http, &u).await;
+        assert_eq!(r.status(), status, "{u}");
+        let e: ApiError = r.json().await.unwrap();
+        assert!(
+            e.message.contains(&want) && !e.message.contains('\n'),
+            "{u}: {}",
+            e.message
+        );
+    }
+    // JSON clients read the whole manifest: the paged documents are bincode only.
+    let r = http
+        .get(format!("{}/v1/manifest/core", s.base))
+        .header("accept", "application/json")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 406);
+    // The server still serves.
+    assert_eq!(get(&http, &url(&live.to_string())).await.status(), 200);
+}
