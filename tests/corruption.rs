@@ -143,6 +143,7 @@ fn damaged_segments_are_rejected_counted_and_fetched_again() {
         max_speed: 2.0,
         max_turn: 2.0,
         transport: portico_native::stream::Transport::Pull,
+        paged: true,
     };
     let s = walk(&cfg, &mut |_, _| {}).unwrap();
     let l = ledger.lock().unwrap();

@@ -324,6 +324,7 @@ fn three_replicas_behind_nginx_survive_losing_one() {
         max_speed: 2.0,
         max_turn: 2.0,
         transport: portico_native::stream::Transport::Pull,
+        paged: true,
     };
     let mut killed = None;
     let s = walk(&cfg, &mut |done, _| {
@@ -463,6 +464,7 @@ fn a_rebuild_and_a_token_behind_nginx_serve_no_stale_or_unauthorised_byte() {
         max_speed: 2.0,
         max_turn: 2.0,
         transport: portico_native::stream::Transport::Pull,
+        paged: true,
     };
     let mut rebuilt = false;
     let s = walk(&cfg, &mut |done, _| {

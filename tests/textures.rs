@@ -74,6 +74,7 @@ fn walk_tiny(db: &Path, out: &Path, cache_bytes: u64) -> WalkSummary {
         max_speed: 1.5,
         max_turn: 1.5,
         transport: portico_native::stream::Transport::Push,
+        paged: true,
     };
     walk(&cfg, &mut |_, _| {}).unwrap()
 }

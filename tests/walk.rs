@@ -37,6 +37,7 @@ fn config(server: String, out: PathBuf, cache_bytes: u64) -> WalkConfig {
         max_speed: 2.0,
         max_turn: 2.0,
         transport: portico_native::stream::Transport::Push,
+        paged: true,
     }
 }
 
@@ -149,35 +150,55 @@ fn full_detail(
     r.picture_with_boxes(&camera, &draws, &[]).unwrap()
 }
 
+/// Whichever way the client learns the model — the core manifest and a page with each stab
+/// list, pushed or pulled, or the whole manifest first — what it draws once everything has
+/// arrived is the full-detail picture; the paged start reads fewer bytes before its first frame.
 #[test]
 fn once_everything_has_arrived_a_frame_matches_the_full_detail_render() {
+    use portico_native::stream::Transport;
     let dir = tempfile::tempdir().unwrap();
     let (server, _) = serve_tiny(dir.path());
-    let out = dir.path().join("walk");
     let db = portico_data::Database::open(&dir.path().join("tiny.portico")).unwrap();
-    let mut cfg = config(server, out.clone(), 64 << 20);
-    cfg.path = standing(&db);
-    cfg.elision = Algorithm::None; // the finest LOD of everything visible
-    cfg.policy.size_threshold_px = 0.0; // and no cap on what the server sends
-    cfg.max_frames = Some(50);
-    cfg.png_every = 49;
-    let s = walk(&cfg, &mut |_, _| {}).unwrap();
-    assert_eq!(s.io_failures, 0);
-    let walked = image::open(out.join("frames/frame_00049.png"))
-        .unwrap()
-        .to_rgba8();
-    let reference = full_detail(&db, &cfg.path, cfg.size, cfg.fovy);
-    let sky = *reference.get_pixel(0, 0);
-    let drawn = reference.pixels().filter(|p| **p != sky).count();
+    let mut startup = Vec::new();
+    for (transport, paged) in [
+        (Transport::Push, true),
+        (Transport::Pull, true),
+        (Transport::Push, false),
+    ] {
+        let out = dir.path().join(format!("walk-{transport}-{paged}"));
+        let mut cfg = config(server.clone(), out.clone(), 64 << 20);
+        cfg.path = standing(&db);
+        cfg.elision = Algorithm::None; // the finest LOD of everything visible
+        cfg.policy.size_threshold_px = 0.0; // and no cap on what the server sends
+        cfg.max_frames = Some(50);
+        cfg.png_every = 49;
+        cfg.transport = transport;
+        cfg.paged = paged;
+        let s = walk(&cfg, &mut |_, _| {}).unwrap();
+        let what = format!("{transport}, paged {paged}");
+        assert_eq!(s.io_failures, 0, "{what}");
+        assert_eq!(s.manifest, if paged { "paged" } else { "whole" }, "{what}");
+        startup.push(s.startup_bytes);
+        let walked = image::open(out.join("frames/frame_00049.png"))
+            .unwrap()
+            .to_rgba8();
+        let reference = full_detail(&db, &cfg.path, cfg.size, cfg.fovy);
+        let sky = *reference.get_pixel(0, 0);
+        let drawn = reference.pixels().filter(|p| **p != sky).count();
+        assert!(
+            drawn * 10 > reference.len() / 4,
+            "the reference view shows the building ({drawn} px)"
+        );
+        let share = differing(&walked, &reference);
+        assert!(
+            share <= 0.01,
+            "{what}: {:.1} % of pixels differ from the full-detail render",
+            share * 100.0
+        );
+    }
     assert!(
-        drawn * 10 > reference.len() / 4,
-        "the reference view shows the building ({drawn} px)"
-    );
-    let share = differing(&walked, &reference);
-    assert!(
-        share <= 0.01,
-        "{:.1} % of pixels differ from the full-detail render",
-        share * 100.0
+        startup[0] == startup[1] && startup[0] < startup[2],
+        "bytes before the first frame, paged and whole: {startup:?}"
     );
 }
 

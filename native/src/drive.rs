@@ -92,6 +92,17 @@ pub trait Fetcher: Clone + Send + Sync + 'static {
     fn stream_url(&self) -> anyhow::Result<String> {
         anyhow::bail!("no push transport")
     }
+    /// Whether the client started from the core manifest, so that the server must send each
+    /// cell's page with its stab list ([`portico_protocol::StreamClient::Pages`]).
+    fn paged(&self) -> bool {
+        false
+    }
+    /// Takes a pushed page ([`portico_protocol::FRAME_PAGE`]'s payload) before the segments
+    /// after it are decoded.
+    fn take_page(&self, deflated: &[u8]) -> anyhow::Result<()> {
+        let _ = deflated;
+        anyhow::bail!("a page came, but this client read the whole manifest")
+    }
     /// When a message sent now reaches the server: now, but later across an emulated link.
     fn reaches_server(&self) -> Instant {
         Instant::now()

@@ -7,21 +7,23 @@
 //! waits for it.
 use crate::drive::{Ask, Event, Fetcher, Items};
 use crate::net::Remote;
+use crate::pages::PageBook;
 use portico_data::cells::StabList;
 use portico_data::geometry::Aabb;
 use portico_data::texture::Wrap;
 use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse, SegmentInfo};
 use portico_render::{GpuImpostor, GpuMesh, GpuTexture, Uploader};
 use std::collections::{HashMap, HashSet};
-use std::sync::Arc;
+use std::sync::{Arc, RwLock};
 use tokio::sync::{mpsc, watch};
 
 /// A segment's contents, ready for the cache.
 pub enum Payload {
     /// Geometry already on the GPU.
     Mesh(GpuMesh),
-    /// A decoded stab list.
-    Stab(Arc<StabList>),
+    /// A decoded stab list, with its cell's page when the client started from the core
+    /// manifest and the page came with it ([`crate::pages`]).
+    Stab(Arc<StabList>, Option<crate::pages::TakenPage>),
     /// A cluster's textured box, on the GPU.
     Impostor(GpuImpostor),
     /// A material texture's mip chain, on the GPU.
@@ -45,7 +47,8 @@ pub struct IoConfig {
 }
 
 /// What the IO stage knows of the model: each segment's size and checksum (the manifest's
-/// table), and which segments are stab lists.
+/// table; started from the core manifest, the rows the pages have brought so far, the rest
+/// [`portico_data::format::UNKNOWN_ROW`]), and which segments are stab lists.
 #[derive(Debug, Clone)]
 pub struct Catalogue {
     /// The manifest's segment table, by id.
@@ -66,7 +69,9 @@ pub struct Catalogue {
 struct Http {
     remote: Remote,
     uploader: Uploader,
-    catalogue: Arc<Catalogue>,
+    catalogue: Arc<RwLock<Catalogue>>,
+    /// Started from the core manifest: the pages.
+    pages: Option<Arc<PageBook>>,
 }
 
 impl Fetcher for Http {
@@ -86,14 +91,44 @@ impl Fetcher for Http {
     ) -> impl Future<Output = anyhow::Result<Items<Payload>>> + Send + 'static {
         let me = self.clone();
         async move {
-            let got = me.remote.batch(&ids).await?;
-            Ok(got
-                .into_iter()
-                .map(|(id, bytes)| {
-                    let item = bytes.and_then(|b| me.load(id, &b).map(|p| (p, b.len() as u64)));
-                    (id, item)
-                })
-                .collect())
+            let Some(book) = me.pages.clone() else {
+                let got = me.remote.batch(&ids).await?;
+                return Ok(got
+                    .into_iter()
+                    .map(|(id, bytes)| {
+                        let item = bytes.and_then(|b| me.load(id, &b).map(|p| (p, b.len() as u64)));
+                        (id, item)
+                    })
+                    .collect());
+            };
+            // Each stab list's page is fetched beside the batch that brings the list; a list
+            // whose page failed fails too (both are asked again).
+            let cells: Vec<(u32, u32)> = ids
+                .iter()
+                .filter_map(|&s| book.claim(s).map(|c| (s, c)))
+                .collect();
+            let pages =
+                futures_util::future::join_all(cells.iter().map(|&(_, c)| me.remote.page(c)));
+            let (got, pages) = tokio::join!(me.remote.batch(&ids), pages);
+            let mut failed = HashMap::new();
+            for (&(seg, cell), page) in cells.iter().zip(pages) {
+                if let Err(e) = page.and_then(|p| book.take(&me.catalogue, p)) {
+                    book.release(cell);
+                    failed.insert(seg, e);
+                }
+            }
+            let mut out = Vec::new();
+            for (id, bytes) in got? {
+                let item = match failed.remove(&id) {
+                    Some(e) => Err(e),
+                    None if !crate::pages::row_known(&me.catalogue, id).await => Err(
+                        anyhow::anyhow!("segment {id}: no page has brought its row yet"),
+                    ),
+                    None => bytes.and_then(|b| me.load(id, &b).map(|p| (p, b.len() as u64))),
+                };
+                out.push((id, item));
+            }
+            Ok(out)
         }
     }
 
@@ -105,8 +140,19 @@ impl Fetcher for Http {
         self.remote.stream_url()
     }
 
+    fn paged(&self) -> bool {
+        self.pages.is_some()
+    }
+
+    fn take_page(&self, deflated: &[u8]) -> anyhow::Result<()> {
+        match &self.pages {
+            Some(book) => book.take_frame(&self.catalogue, deflated),
+            None => anyhow::bail!("a page came, but this client read the whole manifest"),
+        }
+    }
+
     fn bytes(&self, id: u32) -> u64 {
-        self.catalogue
+        self.catalogue()
             .segments
             .get(id as usize)
             .map_or(0, |s| s.bytes)
@@ -114,7 +160,7 @@ impl Fetcher for Http {
 
     fn held_bytes(&self, id: u32) -> u64 {
         let wire = self.bytes(id);
-        self.catalogue
+        self.catalogue()
             .decoded
             .get(&id)
             .map_or(wire, |&d| d.max(wire))
@@ -122,32 +168,40 @@ impl Fetcher for Http {
 }
 
 impl Http {
+    fn catalogue(&self) -> std::sync::RwLockReadGuard<'_, Catalogue> {
+        self.catalogue.read().unwrap_or_else(|e| e.into_inner())
+    }
+
     /// Rejects a segment whose bytes do not match the manifest (it is counted and asked for
     /// again later), and turns the rest into cache entries.
     fn load(&self, id: u32, bytes: &[u8]) -> anyhow::Result<Payload> {
-        verify(self.catalogue.segments.get(id as usize), id, bytes)?;
-        if let Some((bounds, tile)) = self.catalogue.textures.get(&id) {
+        let catalogue = self.catalogue();
+        let row = catalogue.segments.get(id as usize).filter(|r| r.kind != 0);
+        verify(row, id, bytes)?;
+        if let Some((bounds, tile)) = catalogue.textures.get(&id) {
             let imp = self
                 .uploader
                 .upload_impostor(bytes, bounds, *tile)
                 .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
             return Ok(Payload::Impostor(imp));
         }
-        if let Some(wrap) = self.catalogue.mips.get(&id) {
+        if let Some(wrap) = catalogue.mips.get(&id) {
             let t = self
                 .uploader
                 .upload_texture(bytes, *wrap)
                 .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
             return Ok(Payload::Texture(t));
         }
-        if self.catalogue.stabs.contains(&id) {
+        if catalogue.stabs.contains(&id) {
             let list = portico_data::format::decode_segment::<StabList>(bytes)
                 .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
-            return Ok(Payload::Stab(Arc::new(list)));
+            let page = self.pages.as_ref().and_then(|b| b.handed(id));
+            return Ok(Payload::Stab(Arc::new(list), page));
         }
         // A compressed segment is decoded here, on the IO thread, into the layout GPUs bind
         // (after its counts are checked against its LOD record).
-        let expected = self.catalogue.decoded.get(&id).copied();
+        let expected = catalogue.decoded.get(&id).copied();
+        drop(catalogue);
         let plain = portico_data::codec::to_gpu_layout_as(id, bytes, expected)
             .map_err(anyhow::Error::msg)?;
         let mesh = self
@@ -179,6 +233,7 @@ impl IoStage {
         remote: Remote,
         uploader: Uploader,
         catalogue: Catalogue,
+        pages: Option<PageBook>,
         cfg: IoConfig,
     ) -> std::io::Result<IoStage> {
         let (state_tx, state_rx) = watch::channel(None);
@@ -186,7 +241,8 @@ impl IoStage {
         let fetcher = Http {
             remote,
             uploader,
-            catalogue: Arc::new(catalogue),
+            catalogue: Arc::new(RwLock::new(catalogue)),
+            pages: pages.map(Arc::new),
         };
         let thread = std::thread::Builder::new()
             .name("portico-io".into())

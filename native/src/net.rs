@@ -4,8 +4,10 @@
 use anyhow::{Context, Result, bail};
 use bytes::Bytes;
 use portico_data::cells::CellGraph;
-use portico_data::format::Header;
-use portico_protocol::{BINCODE_MIME, Manifest, PrefetchRequest, PrefetchResponse};
+use portico_data::format::{Header, InstanceRecord};
+use portico_protocol::{
+    BINCODE_MIME, CoreManifest, Manifest, Page, PrefetchRequest, PrefetchResponse,
+};
 use std::time::Duration;
 
 /// The server no longer serves the database the client's URLs name (it was rebuilt and
@@ -77,6 +79,17 @@ impl Remote {
     }
 
     async fn fetch(&self, req: reqwest::RequestBuilder, what: &str) -> Result<Bytes> {
+        self.fetch_found(req, what)
+            .await?
+            .map_err(|msg| anyhow::anyhow!("{}: {what}: 404 Not Found: {msg}", self.base))
+    }
+
+    /// [`Remote::fetch`], with a 404's message as `Ok(Err(_))`.
+    async fn fetch_found(
+        &self,
+        req: reqwest::RequestBuilder,
+        what: &str,
+    ) -> Result<Result<Bytes, String>> {
         let resp = req
             .send()
             .await
@@ -93,9 +106,12 @@ impl Remote {
             if status == reqwest::StatusCode::GONE {
                 return Err(Stale(format!("{}: {what}: {msg}", self.base)).into());
             }
+            if status == reqwest::StatusCode::NOT_FOUND {
+                return Ok(Err(msg));
+            }
             bail!("{}: {what}: {status}: {msg}", self.base);
         }
-        Ok(body)
+        Ok(Ok(body))
     }
 
     /// Where segments are read and prefetch asked: `/v1/db/{database_id}` once a manifest named
@@ -117,6 +133,32 @@ impl Remote {
             *d = Some(m.database_id.clone());
         }
         Ok(m)
+    }
+
+    /// `GET /v1/manifest/core` ([`CoreManifest`]); `Ok(None)` from a server without it (404:
+    /// one older than the paged manifest), whose whole manifest is read instead.
+    pub async fn core(&self) -> Result<Option<CoreManifest<Header>>> {
+        let Ok(b) = self
+            .fetch_found(self.get("/v1/manifest/core"), "core manifest")
+            .await?
+        else {
+            return Ok(None);
+        };
+        let m: CoreManifest<Header> = portico_protocol::from_bincode(&b)
+            .with_context(|| format!("{}: core manifest does not decode", self.base))?;
+        if let Ok(mut d) = self.database.write() {
+            *d = Some(m.database_id.clone());
+        }
+        Ok(Some(m))
+    }
+
+    /// `GET /v1/db/{database_id}/pages/{cell}`: the cell's [`Page`].
+    pub async fn page(&self, cell: u32) -> Result<Page<InstanceRecord>> {
+        let url = format!("{}/pages/{cell}", self.segments_base());
+        let what = format!("page of cell {cell}");
+        let b = self.fetch(self.get(&url), &what).await?;
+        portico_protocol::from_bincode(&b)
+            .with_context(|| format!("{}: {what} does not decode", self.base))
     }
 
     /// `GET /v1/cells` (ask only when the manifest's header has cells).
@@ -188,6 +230,27 @@ pub fn model_blocking(remote: &Remote) -> Result<(Manifest<Header>, Option<CellG
         .enable_all()
         .build()?;
     rt.block_on(remote.model())
+}
+
+/// What a client needs before its first frame, paged: the core manifest and the cell graph;
+/// `Ok(None)` from a server without the paged manifest.
+pub fn core_blocking(remote: &Remote) -> Result<Option<(CoreManifest<Header>, Option<CellGraph>)>> {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()?;
+    rt.block_on(async {
+        // Both at once: one round trip before the first frame, not two (a model without
+        // cells answers the graph's request with 404, and it is not used).
+        let (core, graph) = tokio::join!(remote.core(), remote.cells());
+        let Some(core) = core? else {
+            return Ok(None);
+        };
+        let graph = match core.header.cells {
+            Some(_) => Some(graph?),
+            None => None,
+        };
+        Ok(Some((core, graph)))
+    })
 }
 
 /// A request that got no answer, in one line: the innermost cause (what the OS said) and,

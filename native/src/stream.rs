@@ -114,6 +114,8 @@ enum Incoming {
         bytes: Vec<u8>,
         listed_at: Instant,
     },
+    /// A cell's page (deflated), taken before the segments after it.
+    Page(Vec<u8>),
     Failed(String),
 }
 
@@ -188,6 +190,10 @@ async fn push<F: Fetcher>(
                     }
                     Err(e) => (Event::Failed(format!("segment {id}: {e:#}")), None),
                 },
+                Incoming::Page(bytes) => match fd.take_page(&bytes) {
+                    Ok(()) => continue,
+                    Err(e) => (Event::Failed(format!("{e:#}")), None),
+                },
                 Incoming::Failed(why) => (Event::Failed(why), None),
             };
             if txd.send(event).await.is_err() {
@@ -212,6 +218,9 @@ async fn push<F: Fetcher>(
     // Hello at once (the first observer must not wait for a round trip), and again with the
     // round trip once the ping's pong says what it is.
     send(&hello(Duration::ZERO));
+    if f.paged() {
+        send(&StreamClient::Pages);
+    }
     let pinged = Instant::now();
     let _ = out.send((f.reaches_server(), Message::Ping(Vec::new().into())));
 
@@ -277,6 +286,7 @@ async fn push<F: Fetcher>(
                         bytes: bytes.to_vec(),
                         listed_at: last_observer,
                     },
+                    Ok(ServerFrame::Page(bytes)) => Incoming::Page(bytes.to_vec()),
                     Ok(ServerFrame::Control(StreamServer::Dropped(_))) => continue,
                     Ok(ServerFrame::Control(StreamServer::Error(e))) => {
                         Incoming::Failed(format!("{shown}: {}: {}", e.code, e.message))

@@ -246,6 +246,7 @@ fn walk_tour(a: &Args, url: &str, path: &CameraPath, out: &Path) -> Result<WalkS
         max_speed: 2.0,
         max_turn: 2.0,
         transport: portico_native::stream::Transport::Push,
+        paged: true,
     };
     let bars = Bars::new();
     bars.start("walk", frames);

@@ -41,6 +41,10 @@ pub struct Args {
     /// or `pull` (/v1/prefetch and /v1/batch each round trip).
     #[arg(long, default_value = "push")]
     transport: portico_native::stream::Transport,
+    /// Read the whole manifest before the first frame (on a big model, megabytes), instead of
+    /// the core manifest and then each cell's page with its stab list.
+    #[arg(long)]
+    whole_manifest: bool,
     /// Output directory for frames.csv, summary.json and PNGs.
     #[arg(short = 'o', long, visible_alias = "output", value_name = "DIR")]
     out: Option<PathBuf>,
@@ -115,6 +119,7 @@ pub fn run(a: Args) -> Result<()> {
         max_speed: 2.0,
         max_turn: 2.0,
         transport: a.transport,
+        paged: !a.whole_manifest,
     };
     if a.window {
         let summary = interactive(&cfg, a.record)?;

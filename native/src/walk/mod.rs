@@ -66,6 +66,10 @@ pub struct WalkConfig {
     /// How the IO stage gets segments: server push (the default, falling back to pull) or
     /// HTTP pull.
     pub transport: crate::stream::Transport,
+    /// Start from the core manifest and learn the model page by page with the stab lists
+    /// ([`crate::pages`]); `false` reads the whole manifest first (as does a server without
+    /// pages).
+    pub paged: bool,
 }
 
 /// The first complete frame of a walk: how soon, and how many bytes it took.
@@ -149,6 +153,13 @@ pub struct WalkSummary {
     pub cost_factor: f64,
     /// Wall-clock seconds of the whole walk.
     pub wall_s: f64,
+    /// How the walk learnt the model: `"paged"` (the core manifest, then pages) or `"whole"`.
+    pub manifest: String,
+    /// Seconds from the start until the model documents (manifest or core, cell graph) were
+    /// read and decoded: the part of the cold start before the first frame.
+    pub startup_s: f64,
+    /// Bytes of those documents as decoded (on the wire less, where gzip-coded).
+    pub startup_bytes: u64,
 }
 
 /// A cached segment.
@@ -161,12 +172,15 @@ enum Resident {
 
 /// The model as the client knows it.
 struct Model {
+    /// Started from the core manifest: a sparse header, growing page by page.
     header: Header,
     graph: Option<CellGraph>,
     bounds: Vec<portico_data::geometry::Aabb>,
     database_id: String,
     model_triangles: u64,
     catalogue: Catalogue,
+    /// `"paged"` or `"whole"`, the seconds and decoded bytes it took ([`WalkSummary::manifest`]).
+    startup: (String, f64, u64),
 }
 
 /// Runs a walk; `on_frame(done, total)` reports progress.

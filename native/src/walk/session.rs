@@ -6,6 +6,7 @@ use super::walker::Walker;
 use super::{Model, WalkConfig, WalkSummary};
 use crate::io::{Catalogue, IoConfig, IoStage};
 use crate::net::Remote;
+use crate::pages::PageBook;
 use anyhow::{Context, Result};
 use glam::Vec3;
 use portico_client::elision::Algorithm;
@@ -39,7 +40,7 @@ impl<'a> Session<'a> {
     pub fn open_on(cfg: &'a WalkConfig, mut renderer: Renderer) -> Result<Session<'a>> {
         let start = Instant::now();
         let remote = Remote::new(&cfg.server, cfg.token.clone())?;
-        let model = load_model(&remote)?;
+        let (model, pages) = load_model(&remote, cfg.paged)?;
         let cost = portico_render::calibrate(&mut renderer)?;
         let (cache_bytes, window) = portico_client::cache::split_budget(cfg.cache_bytes);
         let policy = Policy {
@@ -53,6 +54,7 @@ impl<'a> Session<'a> {
             remote,
             renderer.uploader(),
             model.catalogue.clone(),
+            pages,
             IoConfig {
                 policy,
                 parallel: 8,
@@ -168,33 +170,71 @@ impl Drop for Session<'_> {
     }
 }
 
-fn load_model(remote: &Remote) -> Result<Model> {
-    let (m, graph) = crate::net::model_blocking(remote)?;
-    let bounds: Vec<_> = m.header.instances.iter().map(|i| i.bounds).collect();
+/// Reads what the first frame needs: the core manifest (pages to follow with the stab lists)
+/// when `paged` and the server has it, else the whole manifest; and the cell graph.
+fn load_model(remote: &Remote, paged: bool) -> Result<(Model, Option<PageBook>)> {
+    let t0 = Instant::now();
+    let core = if paged {
+        crate::net::core_blocking(remote)?
+    } else {
+        None
+    };
+    let Some((core, graph)) = core else {
+        let (m, graph) = crate::net::model_blocking(remote)?;
+        let bytes = portico_protocol::to_bincode(&m).map_or(0, |b| b.len() as u64)
+            + graph_bytes(graph.as_ref());
+        let triangles = m.header.finest_triangles();
+        let segments = m.segments;
+        let mut model = model_of(remote, m.header, graph, m.database_id, triangles, segments)?;
+        model.startup = ("whole".into(), t0.elapsed().as_secs_f64(), bytes);
+        return Ok((model, None));
+    };
+    let bytes = portico_protocol::to_bincode(&core).map_or(0, |b| b.len() as u64)
+        + graph_bytes(graph.as_ref());
+    let mut rows = vec![portico_data::format::UNKNOWN_ROW; core.segment_count as usize];
+    for &(s, r) in &core.rows {
+        if let Some(slot) = rows.get_mut(s as usize) {
+            *slot = r;
+        }
+    }
+    let book = PageBook::new(core.header.core(), core.instance_count);
+    let header = portico_data::format::Header::sparse(core.header, core.instance_count);
+    let mut model = model_of(
+        remote,
+        header,
+        graph,
+        core.database_id,
+        core.triangles,
+        rows,
+    )?;
+    model.startup = ("paged".into(), t0.elapsed().as_secs_f64(), bytes);
+    Ok((model, Some(book)))
+}
+
+fn graph_bytes(graph: Option<&portico_data::cells::CellGraph>) -> u64 {
+    graph.map_or(0, |g| portico_data::format::encode_segment(g).len() as u64)
+}
+
+fn model_of(
+    remote: &Remote,
+    header: portico_data::format::Header,
+    graph: Option<portico_data::cells::CellGraph>,
+    database_id: String,
+    model_triangles: u64,
+    segments: Vec<portico_protocol::SegmentInfo>,
+) -> Result<Model> {
+    let bounds: Vec<_> = header.instances.iter().map(|i| i.bounds).collect();
     // Indices from the manifest are used as they are below: check them once.
-    if let Some(h) = &m.header.hierarchy {
+    if let Some(h) = &header.hierarchy {
         h.check(&bounds)
             .map_err(|e| anyhow::anyhow!("{}: the manifest's hierarchy: {e}", remote.base()))?;
     }
-    let model_triangles = m
-        .header
-        .instances
-        .iter()
-        .map(|i| {
-            m.header
-                .lods_of(i)
-                .first()
-                .map_or(0, |l| l.triangles as u64)
-        })
-        .sum();
-    let stabs = m
-        .header
+    let stabs = header
         .cells
         .as_ref()
         .map(|c| c.stab_segments.iter().copied().collect())
         .unwrap_or_default();
-    let textures = m
-        .header
+    let textures = header
         .hierarchy
         .iter()
         .flat_map(|h| &h.nodes)
@@ -203,21 +243,21 @@ fn load_model(remote: &Remote) -> Result<Model> {
         .collect();
     Ok(Model {
         catalogue: Catalogue {
-            segments: m.segments,
+            segments,
             stabs,
             textures,
-            mips: m
-                .header
+            mips: header
                 .textures
                 .iter()
                 .flat_map(|t| t.segments.iter().map(move |s| (s.segment, t.wrap)))
                 .collect(),
-            decoded: m.header.decoded_sizes().collect(),
+            decoded: header.decoded_sizes().collect(),
         },
-        header: m.header,
+        header,
         graph,
         bounds,
-        database_id: m.database_id,
+        database_id,
         model_triangles,
+        startup: Default::default(),
     })
 }

@@ -108,7 +108,17 @@ impl<'a> Walker<'a> {
                             let gpu = m.gpu_bytes();
                             (Resident::Mesh(m), bytes.max(gpu))
                         }
-                        Payload::Stab(s) => (Resident::Stab(s), bytes),
+                        Payload::Stab(s, page) => {
+                            // The instances its cell's page brought (paged manifest): known
+                            // from this frame on.
+                            if let Some(p) = page {
+                                for i in self.model.header.take_page(&p) {
+                                    self.model.bounds[i as usize] =
+                                        self.model.header.instances[i as usize].bounds;
+                                }
+                            }
+                            (Resident::Stab(s), bytes)
+                        }
                         Payload::Impostor(i) => {
                             let gpu = i.gpu_bytes();
                             (Resident::Impostor(i), bytes.max(gpu))
@@ -307,6 +317,9 @@ impl<'a> Walker<'a> {
             cost_model: self.cost,
             cost_factor: self.online.factor(),
             wall_s,
+            manifest: self.model.startup.0.clone(),
+            startup_s: self.model.startup.1,
+            startup_bytes: self.model.startup.2,
         };
         if let Some(out) = &self.cfg.out {
             write_csv(&out.join("frames.csv"), rows).context("writing frames.csv")?;
