@@ -290,6 +290,28 @@ fn standing(path: &CameraPath) -> CameraPath {
     }
 }
 
+/// The default policy against Funkhouser's range lookahead (with both baselines) in one run:
+/// the tiny building served in `dir`, its tour made into a path by `path`, over `link`, 50 ms
+/// frames, `frames` of them.
+fn default_against_range(
+    dir: &Path,
+    path: fn(&CameraPath) -> CameraPath,
+    link: &str,
+    frames: u64,
+) -> LoadtestSummary {
+    let (server, db) = serve_tiny(dir);
+    let mut cfg = config(server, path(&tour(&db)), dir.join("lt"));
+    cfg.link = Link::parse(link).unwrap();
+    cfg.budget_s = 0.05;
+    cfg.max_frames = Some(frames);
+    let range = parse_policy("look=any", Policy::default()).unwrap();
+    cfg.policies = vec![
+        ("default".into(), Policy::default()),
+        ("range".into(), range),
+    ];
+    run(&cfg, &mut |_, _| {}).unwrap()
+}
+
 /// Cold start (Funkhouser §5.2.4, and the claim of `portico_client::deadline`): what the frame
 /// lacks is read ahead of the server's answer, which is a round trip old and at the start not
 /// there yet, so the first complete frame comes with demand fetch's, in frames and in bytes,
@@ -298,17 +320,7 @@ fn standing(path: &CameraPath) -> CameraPath {
 #[test]
 fn the_cold_start_is_no_slower_than_demand_fetch() {
     let dir = tempfile::tempdir().unwrap();
-    let (server, db) = serve_tiny(dir.path());
-    let mut cfg = config(server, standing(&tour(&db)), dir.path().join("lt"));
-    cfg.link = Link::parse("rtt=60ms,rate=8mbit").unwrap();
-    cfg.budget_s = 0.05;
-    cfg.max_frames = Some(24);
-    let range = parse_policy("look=any", Policy::default()).unwrap();
-    cfg.policies = vec![
-        ("default".into(), Policy::default()),
-        ("range".into(), range),
-    ];
-    let s = run(&cfg, &mut |_, _| {}).unwrap();
+    let s = default_against_range(dir.path(), standing, "rtt=60ms,rate=8mbit", 24);
     let firsts = |name: &str| -> Vec<(u64, u64)> {
         s.get(name)
             .unwrap()
@@ -345,17 +357,7 @@ fn the_cold_start_is_no_slower_than_demand_fetch() {
 #[test]
 fn the_default_prefetch_reads_little_more_than_the_oracle_and_skips_no_more() {
     let dir = tempfile::tempdir().unwrap();
-    let (server, db) = serve_tiny(dir.path());
-    let mut cfg = config(server, tour(&db), dir.path().join("lt"));
-    cfg.link = Link::parse("rtt=50ms,rate=10mbit").unwrap();
-    cfg.budget_s = 0.05;
-    cfg.max_frames = Some(120);
-    let range = parse_policy("look=any", Policy::default()).unwrap();
-    cfg.policies = vec![
-        ("default".into(), Policy::default()),
-        ("range".into(), range),
-    ];
-    let s = run(&cfg, &mut |_, _| {}).unwrap();
+    let s = default_against_range(dir.path(), |t| t.clone(), "rtt=50ms,rate=10mbit", 120);
     let (p, r, o) = (
         s.get("default").unwrap(),
         s.get("range").unwrap(),

@@ -103,6 +103,13 @@ pub trait Fetcher: Clone + Send + Sync + 'static {
         let _ = deflated;
         anyhow::bail!("a page came, but this client read the whole manifest")
     }
+    /// Waits until a pushed segment can be decoded (started from the core manifest: its row has
+    /// come, and a stab list's page); an [`crate::io::Unready`] error gives it back to the
+    /// server.
+    fn settle(&self, id: u32) -> impl Future<Output = anyhow::Result<()>> + Send + 'static {
+        let _ = id;
+        async { Ok(()) }
+    }
     /// When a message sent now reaches the server: now, but later across an emulated link.
     fn reaches_server(&self) -> Instant {
         Instant::now()

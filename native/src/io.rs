@@ -101,29 +101,28 @@ impl Fetcher for Http {
                     })
                     .collect());
             };
-            // Each stab list's page is fetched beside the batch that brings the list; a list
-            // whose page failed fails too (both are asked again).
+            // Each stab list's page is fetched beside the batch that brings the list and taken
+            // as soon as it comes; a list whose page failed fails too (both are asked again).
             let cells: Vec<(u32, u32)> = ids
                 .iter()
                 .filter_map(|&s| book.claim(s).map(|c| (s, c)))
                 .collect();
-            let pages =
-                futures_util::future::join_all(cells.iter().map(|&(_, c)| me.remote.page(c)));
+            let pages = futures_util::future::join_all(
+                cells
+                    .iter()
+                    .map(|&(seg, cell)| me.fetch_page(&book, seg, cell)),
+            );
             let (got, pages) = tokio::join!(me.remote.batch(&ids), pages);
-            let mut failed = HashMap::new();
-            for (&(seg, cell), page) in cells.iter().zip(pages) {
-                if let Err(e) = page.and_then(|p| book.take(&me.catalogue, p)) {
-                    book.release(cell);
-                    failed.insert(seg, e);
-                }
-            }
+            let mut failed: HashMap<u32, anyhow::Error> =
+                pages.into_iter().filter_map(|r| r.err()).collect();
+            let deadline = tokio::time::Instant::now() + crate::pages::ROW_WAIT;
             let mut out = Vec::new();
             for (id, bytes) in got? {
                 let item = match failed.remove(&id) {
                     Some(e) => Err(e),
-                    None if !crate::pages::row_known(&me.catalogue, id).await => Err(
-                        anyhow::anyhow!("segment {id}: no page has brought its row yet"),
-                    ),
+                    None if !book.ready(&me.catalogue, id, deadline).await => Err(anyhow::anyhow!(
+                        "segment {id}: no page has brought its row (or its cell's page) yet"
+                    )),
                     None => bytes.and_then(|b| me.load(id, &b).map(|p| (p, b.len() as u64))),
                 };
                 out.push((id, item));
@@ -151,6 +150,26 @@ impl Fetcher for Http {
         }
     }
 
+    fn settle(&self, id: u32) -> impl Future<Output = anyhow::Result<()>> + Send + 'static {
+        let me = self.clone();
+        async move {
+            let Some(book) = me.pages.clone() else {
+                return Ok(());
+            };
+            // A pushed stab list whose page did not come first (the server could not make it,
+            // or it was refused here) has its page read over HTTP.
+            if let Some(cell) = book.claim(id) {
+                me.fetch_page(&book, id, cell).await.map_err(|(_, e)| e)?;
+            }
+            let deadline = tokio::time::Instant::now() + crate::pages::ROW_WAIT;
+            if book.ready(&me.catalogue, id, deadline).await {
+                Ok(())
+            } else {
+                Err(Unready(id).into())
+            }
+        }
+    }
+
     fn bytes(&self, id: u32) -> u64 {
         self.catalogue()
             .segments
@@ -167,7 +186,31 @@ impl Fetcher for Http {
     }
 }
 
+/// A pushed segment whose row no page has brought: the stream gives it back (`Evicted`) so
+/// that the server pushes it again once the page has come.
+#[derive(Debug, thiserror::Error)]
+#[error("segment {0}: no page has brought its row yet")]
+pub struct Unready(pub u32);
+
 impl Http {
+    /// Fetches and takes cell `cell`'s page (for stab list segment `seg`); on failure the cell
+    /// is released to be asked again, and the error is keyed by the stab list.
+    async fn fetch_page(
+        &self,
+        book: &PageBook,
+        seg: u32,
+        cell: u32,
+    ) -> Result<(), (u32, anyhow::Error)> {
+        let r = match self.remote.page(cell).await {
+            Ok(p) => book.take(&self.catalogue, p, Some(cell)),
+            Err(e) => Err(e),
+        };
+        r.map_err(|e| {
+            book.release(cell);
+            (seg, e)
+        })
+    }
+
     fn catalogue(&self) -> std::sync::RwLockReadGuard<'_, Catalogue> {
         self.catalogue.read().unwrap_or_else(|e| e.into_inner())
     }

@@ -4,10 +4,9 @@
 use anyhow::{Context, Result, bail};
 use bytes::Bytes;
 use portico_data::cells::CellGraph;
-use portico_data::format::{Header, InstanceRecord};
-use portico_protocol::{
-    BINCODE_MIME, CoreManifest, Manifest, Page, PrefetchRequest, PrefetchResponse,
-};
+use portico_data::cells::paged::GraphCore;
+use portico_data::format::{CellPage, Header};
+use portico_protocol::{BINCODE_MIME, CoreManifest, Manifest, PrefetchRequest, PrefetchResponse};
 use std::time::Duration;
 
 /// The server no longer serves the database the client's URLs name (it was rebuilt and
@@ -137,14 +136,14 @@ impl Remote {
 
     /// `GET /v1/manifest/core` ([`CoreManifest`]); `Ok(None)` from a server without it (404:
     /// one older than the paged manifest), whose whole manifest is read instead.
-    pub async fn core(&self) -> Result<Option<CoreManifest<Header>>> {
+    pub async fn core(&self) -> Result<Option<CoreManifest<Header, GraphCore>>> {
         let Ok(b) = self
             .fetch_found(self.get("/v1/manifest/core"), "core manifest")
             .await?
         else {
             return Ok(None);
         };
-        let m: CoreManifest<Header> = portico_protocol::from_bincode(&b)
+        let m: CoreManifest<Header, GraphCore> = portico_protocol::from_bincode(&b)
             .with_context(|| format!("{}: core manifest does not decode", self.base))?;
         if let Ok(mut d) = self.database.write() {
             *d = Some(m.database_id.clone());
@@ -152,8 +151,8 @@ impl Remote {
         Ok(Some(m))
     }
 
-    /// `GET /v1/db/{database_id}/pages/{cell}`: the cell's [`Page`].
-    pub async fn page(&self, cell: u32) -> Result<Page<InstanceRecord>> {
+    /// `GET /v1/db/{database_id}/pages/{cell}`: the cell's page.
+    pub async fn page(&self, cell: u32) -> Result<CellPage> {
         let url = format!("{}/pages/{cell}", self.segments_base());
         let what = format!("page of cell {cell}");
         let b = self.fetch(self.get(&url), &what).await?;
@@ -232,25 +231,13 @@ pub fn model_blocking(remote: &Remote) -> Result<(Manifest<Header>, Option<CellG
     rt.block_on(remote.model())
 }
 
-/// What a client needs before its first frame, paged: the core manifest and the cell graph;
-/// `Ok(None)` from a server without the paged manifest.
-pub fn core_blocking(remote: &Remote) -> Result<Option<(CoreManifest<Header>, Option<CellGraph>)>> {
+/// What a client needs before its first frame, paged: the core manifest alone (one round
+/// trip; the cell graph comes page by page too); `Ok(None)` from a server without it.
+pub fn core_blocking(remote: &Remote) -> Result<Option<CoreManifest<Header, GraphCore>>> {
     let rt = tokio::runtime::Builder::new_current_thread()
         .enable_all()
         .build()?;
-    rt.block_on(async {
-        // Both at once: one round trip before the first frame, not two (a model without
-        // cells answers the graph's request with 404, and it is not used).
-        let (core, graph) = tokio::join!(remote.core(), remote.cells());
-        let Some(core) = core? else {
-            return Ok(None);
-        };
-        let graph = match core.header.cells {
-            Some(_) => Some(graph?),
-            None => None,
-        };
-        Ok(Some((core, graph)))
-    })
+    rt.block_on(remote.core())
 }
 
 /// A request that got no answer, in one line: the innermost cause (what the OS said) and,

@@ -169,7 +169,7 @@ async fn push<F: Fetcher>(
     // In: each frame is the client's when the link has brought it; decoded, then handed on.
     let handed = Arc::new(Mutex::new(Handed::default()));
     let (inbox, mut in_rx) = mpsc::unbounded_channel::<(Instant, Incoming)>();
-    let (fd, txd, h) = (f.clone(), tx.clone(), handed.clone());
+    let (fd, txd, h, outd) = (f.clone(), tx.clone(), handed.clone(), out.clone());
     let mut delivery = tokio::spawn(async move {
         while let Some((at, got)) = in_rx.recv().await {
             tokio::time::sleep_until(at.into()).await;
@@ -178,7 +178,7 @@ async fn push<F: Fetcher>(
                     id,
                     bytes,
                     listed_at,
-                } => match fd.decode(id, &bytes) {
+                } => match fd.settle(id).await.and_then(|()| fd.decode(id, &bytes)) {
                     Ok(body) => {
                         let e = Event::Segment {
                             id,
@@ -187,6 +187,15 @@ async fn push<F: Fetcher>(
                             listed_at,
                         };
                         (e, Some(id))
+                    }
+                    // Pushed before any page brought its row (a policy whose list names what
+                    // no pushed stab list does): given back, the server pushes it again later.
+                    Err(e) if e.is::<crate::io::Unready>() => {
+                        tracing::debug!("stream: {e:#}");
+                        let back = portico_protocol::to_bincode(&StreamClient::Evicted(vec![id]))
+                            .unwrap_or_default();
+                        let _ = outd.send((fd.reaches_server(), Message::Binary(back.into())));
+                        continue;
                     }
                     Err(e) => (Event::Failed(format!("segment {id}: {e:#}")), None),
                 },

@@ -67,9 +67,6 @@ impl AppState {
         let manifest_bincode = portico_protocol::to_bincode(&manifest)
             .map(|b| Precompressed::new(Bytes::from(b)))
             .map_err(|e| DataError::NotFound(format!("manifest does not encode: {e}")))?;
-        let core_bincode = crate::paged::core_bincode(&db, &database_id)
-            .map(|b| Precompressed::new(Bytes::from(b)))
-            .map_err(|e| DataError::NotFound(format!("core manifest does not encode: {e}")))?;
         let stab_cells = db
             .header()
             .cells
@@ -92,6 +89,10 @@ impl AppState {
             })
             .collect();
         let prefetcher = Prefetcher::new(db)?;
+        let core_bincode =
+            crate::paged::core_bincode(prefetcher.database(), prefetcher.graph(), &database_id)
+                .map(|b| Precompressed::new(Bytes::from(b)))
+                .map_err(|e| DataError::NotFound(format!("core manifest does not encode: {e}")))?;
         prefetcher
             .shared_answers()
             .set_capacity(config.shared_cache_bytes);

@@ -37,8 +37,8 @@ use portico_data::deadline::{MARGIN_FRAMES, cannot_wait};
 use portico_data::prefetch::NeedList;
 use portico_data::prefetch::shared::{ShareKey, SharePlace, encode_policy};
 use portico_protocol::{
-    FRAME_CONTROL, LookaheadCull, MAX_LACKING, Observer, PROTOCOL_VERSION, Policy, StreamClient,
-    StreamServer, segment_frame,
+    FRAME_CONTROL, LookaheadCull, MAX_LACKING, NeedKind, Observer, PROTOCOL_VERSION, Policy,
+    StreamClient, StreamServer, segment_frame,
 };
 use std::collections::HashSet;
 use std::future::Future;
@@ -221,20 +221,33 @@ impl Session {
         let state = self.state.clone();
         let policy = self.policy;
         let key = place.map(|p| ShareKey::new(p, self.policy_bytes.clone()));
+        let paged = self.paged;
         Box::pin(async move {
             let s = state.clone();
             state
                 .compute
                 .run(move |budget| {
                     let p = &s.prefetcher;
-                    match &key {
+                    let list = match &key {
                         Some(k) => p.shared_list(k, &obs, &policy, &budget),
                         None => {
                             s.metrics.stream_own_lists.fetch_add(1, Relaxed);
                             p.need_list_within(&obs, &policy, &budget).map(Arc::new)
                         }
                     }
-                    .map_err(Error::from)
+                    .map_err(Error::from)?;
+                    // The pages of the list's stab lists, made here on the compute slot so that
+                    // pushing them costs the async worker nothing ([`crate::paged`]).
+                    if paged {
+                        for item in list.items.iter().filter(|i| i.kind == NeedKind::Stab) {
+                            if let Some(&cell) = s.stab_cells.get(&item.segment)
+                                && let Err(e) = s.page(cell)
+                            {
+                                tracing::warn!("page of cell {cell}: {}", e.to_api().message);
+                            }
+                        }
+                    }
+                    Ok(list)
                 })
                 .await
         })
@@ -346,7 +359,11 @@ impl Session {
         }
         if let Some(p) = place {
             let key = ShareKey::new(p, self.policy_bytes.clone());
-            if let Some(list) = self.state.prefetcher.shared_cached(&key) {
+            // A paged session takes a cached list only once its stab lists' pages are made
+            // (else the computation, on a compute slot, makes them).
+            if let Some(list) = self.state.prefetcher.shared_cached(&key)
+                && (!self.paged || self.pages_made(&list))
+            {
                 m.update(arrived.elapsed().as_secs_f64(), updates);
                 return self.take_list(list, place, arrived);
             }
@@ -360,6 +377,15 @@ impl Session {
             generation: self.generation,
         });
         None
+    }
+
+    /// Whether the pages of every stab list in `list` are made ([`AppState::page_made`]).
+    fn pages_made(&self, list: &NeedList) -> bool {
+        list.items
+            .iter()
+            .filter(|i| i.kind == NeedKind::Stab)
+            .filter_map(|i| self.state.stab_cells.get(&i.segment))
+            .all(|&c| self.state.page_made(c).is_some())
     }
 
     /// A computation finished: its list is taken unless it is stale (another place is wanted
@@ -419,15 +445,16 @@ impl Session {
         };
         if self.paged
             && let Some(&cell) = self.state.stab_cells.get(&segment)
-            && self.pages_sent.insert(cell)
+            && !self.pages_sent.contains(&cell)
         {
-            let frame = match self.state.page(cell) {
-                Ok(p) => portico_protocol::deflate_page(&p.identity),
-                Err(e) => return Some(control(&StreamServer::Error(e.to_api()))),
-            };
-            self.after_page = Some(segment);
-            self.pace(frame.len());
-            return Some(Message::Binary(frame.into()));
+            // Made on the compute slot with the need list; one that is not (an LRU eviction in
+            // between, or it failed there) is left to the client, which reads it over HTTP.
+            if let Some(p) = self.state.page_made(cell) {
+                self.pages_sent.insert(cell);
+                self.after_page = Some(segment);
+                self.pace(p.frame.len());
+                return Some(Message::Binary(p.frame.clone()));
+            }
         }
         let bytes = match self.state.db().segment(segment) {
             Ok(b) => b,
@@ -480,8 +507,12 @@ impl Session {
         for i in self.cursor..self.list.items.len() {
             let item = self.list.items[i];
             let wanted = i < self.list.fit || self.list.must[i];
-            let due = lead
-                .is_none_or(|l| cannot_wait(item.frames, dt, l, queued, item.bytes as f64, rate));
+            // A paged client can check nothing before the stab lists' pages have come: they go
+            // first, whatever their deadlines.
+            let due = (self.paged && item.kind == NeedKind::Stab)
+                || lead.is_none_or(|l| {
+                    cannot_wait(item.frames, dt, l, queued, item.bytes as f64, rate)
+                });
             if !wanted || self.mirror.contains(&item.segment) || due {
                 if settled {
                     self.cursor = i + 1;

@@ -1,9 +1,11 @@
 //! The paged manifest over HTTP: the core is the manifest less its instance and segment
-//! tables, each live cell's page is the part of them its stab list names (gzip-coded,
+//! tables and the cell graph less its cells, each live cell's page is the part of them its
+//! stab list names and reaches (gzip-coded,
 //! immutable under the database id), and bad cells get one-line errors.
 
-use portico_data::format::{Header, InstanceRecord};
-use portico_protocol::{ApiError, BINCODE_MIME, CoreManifest, Manifest, Page};
+use portico_data::cells::paged::GraphCore;
+use portico_data::format::{CellPage, Header};
+use portico_protocol::{ApiError, BINCODE_MIME, CoreManifest, Manifest};
 use portico_server::Config;
 
 mod common;
@@ -33,7 +35,10 @@ async fn the_core_and_the_pages_make_up_the_whole_manifest() {
     assert_eq!(r.status(), 200);
     assert_eq!(r.headers()["cache-control"], "no-cache");
     let core_bytes = r.bytes().await.unwrap();
-    let core: CoreManifest<Header> = portico_protocol::from_bincode(&core_bytes).unwrap();
+    let core: CoreManifest<Header, GraphCore> =
+        portico_protocol::from_bincode(&core_bytes).unwrap();
+    let graph = s.state.prefetcher.graph().unwrap();
+    assert_eq!(core.graph, Some(graph.core()));
     assert_eq!(core.database_id, whole.database_id);
     assert_eq!(core.segment_count as usize, whole.segments.len());
     assert_eq!(core.instance_count as usize, whole.header.instances.len());
@@ -57,8 +62,9 @@ async fn the_core_and_the_pages_make_up_the_whole_manifest() {
             r.headers()["cache-control"],
             portico_server::routes::IMMUTABLE
         );
-        let page: Page<InstanceRecord> =
-            portico_protocol::from_bincode(&r.bytes().await.unwrap()).unwrap();
+        let page: CellPage = portico_protocol::from_bincode(&r.bytes().await.unwrap()).unwrap();
+        assert_eq!(page.graph, graph.part(&db.stab_list(cell as u32).unwrap()));
+        assert!(page.graph.cells.iter().any(|(c, _)| *c == cell as u32));
         assert_eq!(page.cell, cell as u32);
         assert_eq!(page.stab, (seg, whole.segments[seg as usize]));
         let stab = db.stab_list(cell as u32).unwrap();

@@ -10,11 +10,14 @@
 //!   through portal sequences (§3.2.2), stored as stab lists.
 //! - [`realtime`]: eye-to-cell and eye-to-object culling by narrowing the view frustum through
 //!   portals (§4.1.2), and plain frustum culling for comparison.
+//! - [`paged`]: the graph cut along the stab lists for the paged manifest (a frame in the core,
+//!   each cell's reach in its page) and grown back on the client.
 //! - [`verify`]: a ray-casting checker for false negatives and overestimation, against the
 //!   objects' real triangles ([`sight`]) or the occluder boxes.
 
 pub mod cover;
 pub mod occluders;
+pub mod paged;
 pub mod polytope;
 pub mod portals;
 pub mod realtime;
@@ -128,11 +131,20 @@ pub struct CellGraph {
 }
 
 impl CellGraph {
-    /// The cell containing `p`, if `p` is inside the subdivision.
+    /// The cell containing `p`, if `p` is inside the subdivision. A graph grown from pages
+    /// ([`CellGraph::sparse`]) has no k-D tree: the live cells it knows are looked through.
     pub fn locate(&self, p: Vec3) -> Option<u32> {
         let b = &self.bounds;
         if (0..3).any(|i| p[i] < b.min[i] || p[i] > b.max[i]) {
             return None;
+        }
+        if self.tree.is_empty() {
+            let inside = |b: &Aabb| (0..3).all(|i| b.min[i] <= p[i] && p[i] <= b.max[i]);
+            return self
+                .cells
+                .iter()
+                .position(|c| c.live && inside(&c.bounds))
+                .map(|c| c as u32);
         }
         let mut node = 0usize;
         loop {

@@ -197,8 +197,9 @@ pub fn eye_to_object(reached: &[Reached], stab: &StabList, objects: &[Aabb]) -> 
 /// Eye-to-object visibility while the eye cell's stab list has not arrived: every object that
 /// touches a reached cell inside the wedge it is seen through. A superset of [`eye_to_object`]
 /// (a stab list only lists, per reached cell, objects touching it that some sightline reaches),
-/// so just as conservative, only looser; it needs nothing but the cell graph, which a client
-/// holds from the start. Linear in the objects: for the few frames a stab list is late.
+/// so just as conservative, only looser; it needs nothing but the cell graph (a client that
+/// started from the paged manifest knows only the cells and objects of the pages it holds).
+/// Linear in the objects: for the few frames a stab list is late.
 pub fn eye_to_object_unlisted(
     graph: &CellGraph,
     reached: &[Reached],

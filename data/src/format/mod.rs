@@ -22,7 +22,7 @@ pub mod reader;
 pub mod writer;
 
 pub use header::{CellIndex, Header, InstanceRecord, LodRecord, ObjectRecord};
-pub use paged::{UNKNOWN_ROW, take_rows};
+pub use paged::{CellPage, MAX_PAGED_COUNT, UNKNOWN_ROW, check_core, take_rows};
 
 use bytemuck::{Pod, Zeroable};
 

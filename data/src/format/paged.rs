@@ -7,9 +7,13 @@
 //! list lets it see, and the instances it knows nothing of are ones no list it holds names.
 
 use super::{Header, InstanceRecord, SegmentKind};
-use crate::cells::StabList;
+use crate::cells::paged::GraphPart;
+use crate::cells::{CellGraph, StabList};
 use crate::geometry::Aabb;
-use portico_protocol::{Page, SegmentInfo};
+use portico_protocol::SegmentInfo;
+
+/// A cell's page of a Portico model ([`portico_protocol::Page`] with the data crate's types).
+pub type CellPage = portico_protocol::Page<InstanceRecord, GraphPart>;
 
 impl Header {
     /// The header without its instance table: what [`portico_protocol::CoreManifest`] carries.
@@ -65,14 +69,16 @@ impl Header {
     }
 
     /// Cell `cell`'s page: the instances `stab` names, with the rows (`row(id)`) of their LOD
-    /// segments and of the stab list's own segment `stab_segment`.
+    /// segments and of the stab list's own segment `stab_segment`, and the part of `graph` the
+    /// list reaches ([`CellGraph::part`]).
     pub fn page(
         &self,
         cell: u32,
         stab_segment: u32,
         stab: &StabList,
         row: &dyn Fn(u32) -> SegmentInfo,
-    ) -> Page<InstanceRecord> {
+        graph: &CellGraph,
+    ) -> CellPage {
         let instances: Vec<(u32, InstanceRecord)> = stab
             .objects()
             .into_iter()
@@ -87,11 +93,12 @@ impl Header {
             .collect();
         segments.sort_unstable();
         segments.dedup();
-        Page {
+        CellPage {
             cell,
             stab: (stab_segment, row(stab_segment)),
             instances,
             segments: segments.into_iter().map(|s| (s, row(s))).collect(),
+            graph: graph.part(stab),
         }
     }
 
@@ -105,10 +112,13 @@ impl Header {
     }
 
     /// Checks a page against this header (a core or a sparse one, of `instances` instances)
-    /// and a segment table of `segments` rows, as [`Header::validate`] checks the whole: each
-    /// instance exists, its object and material exist, its transform is finite, its LODs are
-    /// geometry rows of the page; every row names an existing segment. A checked page can be
-    /// taken without further checks ([`Header::take_page`], [`take_rows`]).
+    /// and a segment table of `segments` rows, as [`Header::validate`] checks the whole: its
+    /// stab list is the cell's, with a stab list's row; each instance exists, its object and
+    /// material exist, its transform is finite, its LODs are geometry rows of the page; every
+    /// row names an existing segment, and is a geometry row (a page never rewrites the core's
+    /// rows). The part of the cell graph is checked by
+    /// [`crate::cells::paged::GraphCore::check_part`]. A checked page can be taken without
+    /// further checks ([`Header::take_page`], [`take_rows`]).
     ///
     /// # Errors
     /// One line naming the cell and the instance or segment at fault.
@@ -116,7 +126,7 @@ impl Header {
         &self,
         instances: u32,
         segments: usize,
-        page: &Page<InstanceRecord>,
+        page: &CellPage,
     ) -> Result<(), String> {
         let at = |what: String| format!("page of cell {}: {what}", page.cell);
         for &(s, _) in page.segments.iter().chain([&page.stab]) {
@@ -124,7 +134,25 @@ impl Header {
                 return Err(at(format!("segment {s} of {segments}")));
             }
         }
+        let own = self
+            .cells
+            .as_ref()
+            .and_then(|c| c.stab_segments.get(page.cell as usize))
+            .copied()
+            .filter(|&s| s != u32::MAX);
+        if own != Some(page.stab.0) || page.stab.1.kind != SegmentKind::StabList as u16 {
+            return Err(at(format!(
+                "names stab list segment {} (kind {}), the cell's is {own:?}",
+                page.stab.0, page.stab.1.kind
+            )));
+        }
         let geometry = SegmentKind::Geometry as u16;
+        if let Some((s, r)) = page.segments.iter().find(|(_, r)| r.kind != geometry) {
+            return Err(at(format!(
+                "segment {s}'s row is of kind {}, not geometry",
+                r.kind
+            )));
+        }
         let known: std::collections::HashMap<u32, SegmentInfo> =
             page.segments.iter().copied().collect();
         for (id, inst) in &page.instances {
@@ -159,7 +187,7 @@ impl Header {
 
     /// Takes a checked page ([`Header::check_page`]) into a sparse header: each of its
     /// instances replaces its placeholder. Returns the instances that were new.
-    pub fn take_page(&mut self, page: &Page<InstanceRecord>) -> Vec<u32> {
+    pub fn take_page(&mut self, page: &CellPage) -> Vec<u32> {
         let mut new = Vec::new();
         for (id, inst) in &page.instances {
             let Some(slot) = self.instances.get_mut(*id as usize) else {
@@ -174,8 +202,71 @@ impl Header {
     }
 }
 
+/// Checks a core manifest's counts before anything is sized by them: at most
+/// [`MAX_PAGED_COUNT`] instances, segments, cells and portals; one stab list entry per cell of
+/// the graph, each naming an existing segment; a finite graph box.
+///
+/// # Errors
+/// One line naming the count or the entry at fault.
+pub fn check_core(
+    header: &Header,
+    segments: u32,
+    instances: u32,
+    graph: Option<&crate::cells::paged::GraphCore>,
+) -> Result<(), String> {
+    let big = |what: &str, n: u32| {
+        if n > MAX_PAGED_COUNT {
+            Err(format!(
+                "the core manifest claims {n} {what}, at most {MAX_PAGED_COUNT}"
+            ))
+        } else {
+            Ok(())
+        }
+    };
+    big("segments", segments)?;
+    big("instances", instances)?;
+    match (&header.cells, graph) {
+        (None, None) => Ok(()),
+        (Some(c), Some(g)) => {
+            big("cells", g.cells)?;
+            big("portals", g.portals)?;
+            if c.stab_segments.len() != g.cells as usize {
+                return Err(format!(
+                    "the core manifest lists {} stab lists for {} cells",
+                    c.stab_segments.len(),
+                    g.cells
+                ));
+            }
+            if let Some(s) = c
+                .stab_segments
+                .iter()
+                .find(|&&s| s != u32::MAX && s >= segments)
+            {
+                return Err(format!(
+                    "the core manifest's stab list segment {s} of {segments}"
+                ));
+            }
+            if !g
+                .bounds
+                .min
+                .iter()
+                .chain(&g.bounds.max)
+                .all(|x| x.is_finite())
+            {
+                return Err("the core manifest's cell graph box is not finite".into());
+            }
+            Ok(())
+        }
+        _ => Err("the core manifest has a cell index without a graph, or the reverse".into()),
+    }
+}
+
+/// Most instances, segments, cells or portals a core manifest may claim (2^26: flattened
+/// `mega` has 463,421 segments).
+pub const MAX_PAGED_COUNT: u32 = 1 << 26;
+
 /// Takes a checked page's rows ([`Header::check_page`]) into a client's segment table.
-pub fn take_rows(rows: &mut [SegmentInfo], page: &Page<InstanceRecord>) {
+pub fn take_rows(rows: &mut [SegmentInfo], page: &CellPage) {
     for &(s, r) in page.segments.iter().chain([&page.stab]) {
         if let Some(slot) = rows.get_mut(s as usize) {
             *slot = r;

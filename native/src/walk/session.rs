@@ -170,8 +170,9 @@ impl Drop for Session<'_> {
     }
 }
 
-/// Reads what the first frame needs: the core manifest (pages to follow with the stab lists)
-/// when `paged` and the server has it, else the whole manifest; and the cell graph.
+/// Reads what the first frame needs: the core manifest (the instances and the cell graph
+/// to follow page by page with the stab lists) when `paged` and the server has it, else the
+/// whole manifest and the cell graph.
 fn load_model(remote: &Remote, paged: bool) -> Result<(Model, Option<PageBook>)> {
     let t0 = Instant::now();
     let core = if paged {
@@ -179,7 +180,7 @@ fn load_model(remote: &Remote, paged: bool) -> Result<(Model, Option<PageBook>)>
     } else {
         None
     };
-    let Some((core, graph)) = core else {
+    let Some(core) = core else {
         let (m, graph) = crate::net::model_blocking(remote)?;
         let bytes = portico_protocol::to_bincode(&m).map_or(0, |b| b.len() as u64)
             + graph_bytes(graph.as_ref());
@@ -189,15 +190,26 @@ fn load_model(remote: &Remote, paged: bool) -> Result<(Model, Option<PageBook>)>
         model.startup = ("whole".into(), t0.elapsed().as_secs_f64(), bytes);
         return Ok((model, None));
     };
-    let bytes = portico_protocol::to_bincode(&core).map_or(0, |b| b.len() as u64)
-        + graph_bytes(graph.as_ref());
+    portico_data::format::check_core(
+        &core.header,
+        core.segment_count,
+        core.instance_count,
+        core.graph.as_ref(),
+    )
+    .map_err(|e| anyhow::anyhow!("{}: {e}", remote.base()))?;
+    let bytes = portico_protocol::to_bincode(&core).map_or(0, |b| b.len() as u64);
+    // The cell graph grows page by page too: its cells and portals come with the stab lists.
+    let graph = core
+        .graph
+        .as_ref()
+        .map(portico_data::cells::CellGraph::sparse);
     let mut rows = vec![portico_data::format::UNKNOWN_ROW; core.segment_count as usize];
     for &(s, r) in &core.rows {
         if let Some(slot) = rows.get_mut(s as usize) {
             *slot = r;
         }
     }
-    let book = PageBook::new(core.header.core(), core.instance_count);
+    let book = PageBook::new(core.header.core(), core.instance_count, core.graph);
     let header = portico_data::format::Header::sparse(core.header, core.instance_count);
     let mut model = model_of(
         remote,

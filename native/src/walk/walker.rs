@@ -116,6 +116,9 @@ impl<'a> Walker<'a> {
                                     self.model.bounds[i as usize] =
                                         self.model.header.instances[i as usize].bounds;
                                 }
+                                if let Some(g) = &mut self.model.graph {
+                                    g.take_part(&p.graph);
+                                }
                             }
                             (Resident::Stab(s), bytes)
                         }
