@@ -159,8 +159,9 @@ impl PageBook {
             .is_none_or(|c| self.state().taken.contains(&c))
     }
 
-    /// Waits until segment `id` is ready ([`PageBook::ready_now`]) while pages are on their way,
-    /// until `deadline` at most; whether it is.
+    /// Waits until segment `id` can be checked and handed on (its row is known and, for a stab
+    /// list, its cell's page was taken) while pages are on their way, until `deadline` at most;
+    /// whether it can.
     pub async fn ready(&self, catalogue: &RwLock<Catalogue>, id: u32, deadline: Instant) -> bool {
         loop {
             if self.ready_now(catalogue, id) {

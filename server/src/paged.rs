@@ -19,7 +19,7 @@ use std::sync::{Arc, Mutex};
 
 /// Most bytes the encoded pages kept may take (bincode, gzip and the push frame of each; a
 /// page of flattened `mega` is 40 KB in all at the median, 1.2 MB at most).
-const PAGE_CACHE_BYTES: usize = 64 << 20;
+pub const PAGE_CACHE_BYTES: usize = 64 << 20;
 
 /// A cell's page, encoded every way it is sent.
 pub struct EncodedPage {
