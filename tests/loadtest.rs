@@ -11,6 +11,14 @@ use std::path::{Path, PathBuf};
 mod common;
 
 /// The tiny building served in this process: base URL and database file.
+/// The load tests run in real time, their simulated clients against their frame clocks: run
+/// side by side on two cores they starve each other (a slow-link run's LODs skipped tripled
+/// under CI's load), so each holds this while it runs.
+fn alone() -> std::sync::MutexGuard<'static, ()> {
+    static ONE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    ONE.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 fn serve_tiny(dir: &Path) -> (String, PathBuf) {
     let (url, _, db) = common::serve_tiny(dir);
     (url, db)
@@ -49,6 +57,7 @@ fn names(s: &LoadtestSummary) -> Vec<&str> {
 
 #[test]
 fn a_loadtest_measures_the_policy_and_both_baselines_and_writes_its_report() {
+    let _alone = alone();
     let dir = tempfile::tempdir().unwrap();
     let (server, db) = serve_tiny(dir.path());
     let out = dir.path().join("lt");
@@ -157,6 +166,7 @@ fn a_loadtest_measures_the_policy_and_both_baselines_and_writes_its_report() {
 
 #[test]
 fn bad_link_specs_are_clear_errors() {
+    let _alone = alone();
     let e = Link::parse("rtt=20ms,rate=lots").unwrap_err();
     assert_eq!(e, LinkError::BadRate("lots".into()));
     assert!(e.to_string().contains("rate=\"lots\""), "{e}");
@@ -173,6 +183,7 @@ fn bad_link_specs_are_clear_errors() {
 
 #[test]
 fn a_bad_config_is_refused_before_anything_runs() {
+    let _alone = alone();
     let dir = tempfile::tempdir().unwrap();
     let path = CameraPath {
         kind: "x".into(),
@@ -199,6 +210,7 @@ fn a_bad_config_is_refused_before_anything_runs() {
 
 #[test]
 fn impostor_clients_always_have_something_for_every_visible_object() {
+    let _alone = alone();
     let dir = tempfile::tempdir().unwrap();
     let (server, db) = serve_tiny(dir.path());
     let mut cfg = config(server, tour(&db), dir.path().join("lt"));
@@ -241,6 +253,7 @@ fn impostor_clients_always_have_something_for_every_visible_object() {
 /// whole run, cold start included, on a slow link where what arrives late shows.
 #[test]
 fn prefetch_beats_demand_fetch_over_the_whole_run_on_a_slow_link() {
+    let _alone = alone();
     let dir = tempfile::tempdir().unwrap();
     let (server, db) = serve_tiny(dir.path());
     let mut cfg = config(server, tour(&db), dir.path().join("lt"));
@@ -319,6 +332,7 @@ fn default_against_range(
 /// what the frame lacked, the range lookahead's came up to 3.3 frames later on a walk here).
 #[test]
 fn the_cold_start_is_no_slower_than_demand_fetch() {
+    let _alone = alone();
     let dir = tempfile::tempdir().unwrap();
     let s = default_against_range(dir.path(), standing, "rtt=60ms,rate=8mbit", 24);
     let firsts = |name: &str| -> Vec<(u64, u64)> {
@@ -356,6 +370,7 @@ fn the_cold_start_is_no_slower_than_demand_fetch() {
 /// hold, or its reads stop waiting for their deadlines.
 #[test]
 fn the_default_prefetch_reads_little_more_than_the_oracle_and_skips_no_more() {
+    let _alone = alone();
     let dir = tempfile::tempdir().unwrap();
     let s = default_against_range(dir.path(), |t| t.clone(), "rtt=50ms,rate=10mbit", 120);
     let (p, r, o) = (
@@ -408,6 +423,7 @@ fn the_default_prefetch_reads_little_more_than_the_oracle_and_skips_no_more() {
 
 #[test]
 fn a_cache_sweep_runs_every_budget_with_both_baselines_and_judges_them() {
+    let _alone = alone();
     let dir = tempfile::tempdir().unwrap();
     let (server, db) = serve_tiny(dir.path());
     let out = dir.path().join("sweep");
@@ -456,6 +472,7 @@ fn a_cache_sweep_runs_every_budget_with_both_baselines_and_judges_them() {
 /// and reads about as little.
 #[test]
 fn push_and_pull_run_in_one_session_and_push_skips_no_more() {
+    let _alone = alone();
     let dir = tempfile::tempdir().unwrap();
     let (server, db) = serve_tiny(dir.path());
     let mut cfg = config(server, tour(&db), dir.path().join("lt"));
