@@ -147,7 +147,8 @@ impl AppState {
 }
 
 /// `GET /v1/manifest/core`: the [`CoreManifest`] (bincode only: JSON clients read the whole
-/// manifest), revalidated like the manifest.
+/// manifest), revalidated like the manifest. 404 for a database without cells, which has no
+/// pages: its clients read the whole manifest.
 pub async fn core(State(s): State<Arc<AppState>>, headers: HeaderMap) -> Result<Response, Error> {
     if !wants_bincode(&headers) {
         return Err(Error::new(
@@ -157,6 +158,13 @@ pub async fn core(State(s): State<Arc<AppState>>, headers: HeaderMap) -> Result<
                 "/v1/manifest/core is bincode only (Accept: {})",
                 portico_protocol::BINCODE_MIME
             ),
+        ));
+    }
+    // Pages are cut along the stab lists: without cells there are none, and a client that
+    // started from the core would never learn an instance. It reads the whole manifest instead.
+    if s.cells_bincode.is_none() {
+        return Err(Error::not_found(
+            "this database has no cells (built with --no-cells), so no pages: read /v1/manifest",
         ));
     }
     Ok(document(

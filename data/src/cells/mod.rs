@@ -24,6 +24,7 @@ pub mod realtime;
 #[cfg(feature = "native")]
 pub mod sight;
 pub mod sightline;
+pub mod solid;
 #[cfg(feature = "native")]
 pub mod stab;
 pub mod subdivide;
@@ -370,8 +371,14 @@ pub fn precompute(
     on_cell: &(dyn Fn() + Sync),
 ) -> Precomputed {
     let t0 = std::time::Instant::now();
-    let core = bulk_of(bounds, objects);
-    let mut graph = subdivide::subdivide_around(bounds, &core, &occluders.faces, &occluders.rooms);
+    let core = core_of(bounds, objects);
+    let mut graph = subdivide::subdivide_around(
+        bounds,
+        &core,
+        &occluders.faces,
+        &occluders.solids,
+        &occluders.rooms,
+    );
     portals::find_portals_around(&mut graph, &core, &occluders.faces, &occluders.solids);
     let incidence = stab::incidence(&graph, objects);
     let subdivision_seconds = t0.elapsed().as_secs_f64();
@@ -388,19 +395,67 @@ pub fn precompute(
     }
 }
 
+/// A surrounding's footprint is at least this many times the rest's along both horizontal
+/// axes.
+pub const SURROUNDING_SCALE: f32 = 3.0;
+/// Most objects taken as surroundings of one model.
+pub const MAX_SURROUNDINGS: usize = 4;
+
+/// The objects that frame a building rather than belong to it (index = object): ground
+/// planes, site terrain, a horizon plane, a sky dome. Each is one of the few objects whose
+/// footprint is at least [`SURROUNDING_SCALE`] times the rest's along both horizontal axes,
+/// and is flat or terrain-like (at most a quarter as high as it is wide) or encloses the rest
+/// on every axis (a dome). Such an object must not set the space the building is subdivided
+/// in: a 60 m ground under a 10 m house would make the whole house one cell.
+pub fn surroundings(objects: &[Aabb]) -> Vec<bool> {
+    let mut out = vec![false; objects.len()];
+    let mut order: Vec<usize> = (0..objects.len()).collect();
+    let footprint = |b: &Aabb| {
+        let s = b.size();
+        s.x.max(0.0) * s.z.max(0.0)
+    };
+    order.sort_by(|&a, &b| footprint(&objects[b]).total_cmp(&footprint(&objects[a])));
+    for &big in order.iter().take(MAX_SURROUNDINGS) {
+        let rest = objects
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| i != big && !out[i])
+            .fold(Aabb::EMPTY, |acc, (_, b)| acc.union(b));
+        if rest.is_empty() {
+            break;
+        }
+        let (b, r) = (objects[big].size(), rest.size());
+        let wide = [0, 2]
+            .iter()
+            .all(|&k| b[k] >= SURROUNDING_SCALE * r[k].max(crate::cells::subdivide::MIN_THICKNESS));
+        let flat = b.y <= 0.25 * b.x.min(b.z);
+        let encloses =
+            (0..3).all(|k| objects[big].min[k] < rest.min[k] && objects[big].max[k] > rest.max[k]);
+        if !(wide && (flat || encloses)) {
+            break;
+        }
+        out[big] = true;
+    }
+    out
+}
+
 #[cfg(feature = "native")]
-/// The part of `bounds` the model's bulk occupies ([`crate::bulk`]); `bounds` itself when the
-/// model has no strays.
-fn bulk_of(bounds: &Aabb, objects: &[Aabb]) -> Aabb {
+/// The part of `bounds` the building occupies: the bulk ([`crate::bulk`]) of the objects that
+/// are not its [`surroundings`]; `bounds` itself when there are neither strays nor
+/// surroundings.
+fn core_of(bounds: &Aabb, objects: &[Aabb]) -> Aabb {
+    let around = surroundings(objects);
     let boxes: Vec<crate::bulk::DBox> = objects
         .iter()
-        .map(|o| crate::bulk::DBox {
+        .zip(&around)
+        .filter(|(_, a)| !**a)
+        .map(|(o, _)| crate::bulk::DBox {
             min: Vec3::from(o.min).as_dvec3(),
             max: Vec3::from(o.max).as_dvec3(),
         })
         .collect();
     let b = crate::bulk::bulk(&boxes);
-    if b.strays.is_empty() || b.bounds.is_empty() {
+    if (b.strays.is_empty() && !around.contains(&true)) || b.bounds.is_empty() {
         return *bounds;
     }
     Aabb {

@@ -11,9 +11,10 @@
 //! Tagged walls and slabs that are not written as boxes (BIM exports triangulate walls around
 //! their openings) give what their triangles cover on both faces instead ([`super::cover`]).
 //!
-//! Untagged models (any imported file without Portico's tags) get the objects shaped like
-//! walls and slabs as occluders ([`structural`]); a model with none of those gets the faces of
-//! any instance with both extents at least [`AUTO_MIN_EXTENT`].
+//! Untagged objects, in untagged models and beside tagged ones alike (BIM exports write walls
+//! as proxies or generic models next to tagged walls), are occluders when shaped like walls
+//! and slabs ([`wall_or_slab`]); a model with no tags and none of those gets the faces of any
+//! instance with both extents at least [`AUTO_MIN_EXTENT`].
 //!
 //! Solid volume matters too: the space inside a wall is cut into cells by the planes of other
 //! walls, and those cells must be dead, not joined to each other by "portals" inside the
@@ -185,49 +186,53 @@ pub const MIN_WALL_THICKNESS: f32 = 0.08;
 pub const MIN_WALL_LENGTH: f32 = 0.5;
 
 /// World occluders for a set of instances, given as (finest mesh in its source triangle order,
-/// transform, tagged). When nothing is tagged, the walls and slabs are found by their shape
-/// ([`structural`]: thin along one axis, large along the others) and give what their triangles
-/// cover ([`super::cover`]); a model without any such object falls back to the large faces of
-/// every instance (and no solids: an untagged box may be furniture, not a wall).
+/// transform, tagged). Tagged instances give their boxes' faces and solids, or what their
+/// triangles cover when they are not written as boxes. Every untagged instance shaped like a
+/// wall or slab ([`wall_or_slab`]: thin along one axis, large along the others) gives what its
+/// triangles cover ([`super::cover`]), whatever the rest of the file is tagged with: BIM tools
+/// export walls as generic models or proxies beside their tagged walls. A model with no
+/// tagged instance and no such object falls back to the large faces of every instance (and no
+/// solids: an untagged box may be furniture, not a wall).
 pub fn occluder_boxes<'a>(
     instances: impl Iterator<Item = (&'a Mesh, Mat4, bool)> + Clone,
 ) -> Occluders {
     let any_tagged = instances.clone().any(|(_, _, tagged)| tagged);
-    if !any_tagged {
-        let found = structural(instances.clone());
-        if !found.faces.is_empty() {
-            return found;
-        }
-    }
     let mut solids = Vec::new();
     let mut out = Vec::new();
     let mut cache: HashMap<*const Mesh, (Vec<Aabb>, Vec<Aabb>)> = HashMap::new();
-    for (mesh, m, tagged) in instances {
-        if any_tagged && !tagged {
+    for (mesh, m, tagged) in instances.clone() {
+        if !tagged {
+            if wall_or_slab(mesh, &m) {
+                add_covered(mesh, &m, &mut solids, &mut out);
+            }
             continue;
         }
         let (pieces, boxes) = cache
             .entry(mesh as *const Mesh)
             .or_insert_with(|| (faces(mesh), solid_boxes(mesh)));
-        if any_tagged && boxes.is_empty() {
-            // Not written as whole boxes (a BIM wall cut around its openings, a gable):
-            // what its triangles cover on both faces.
-            if add_covered(mesh, &m, &mut solids, &mut out) {
-                continue;
-            }
+        // Not written as whole boxes (a BIM wall cut around its openings, a gable): what its
+        // triangles cover on both faces.
+        if boxes.is_empty() && add_covered(mesh, &m, &mut solids, &mut out) {
+            continue;
         }
-        if any_tagged {
-            solids.extend(boxes.iter().filter_map(|b| transform_box(b, &m)));
-        }
-        for p in pieces.iter() {
-            let Some(w) = transform_box(p, &m) else {
-                continue;
-            };
-            let s = w.size();
-            let mut e = [s.x, s.y, s.z];
-            e.sort_by(f32::total_cmp);
-            if any_tagged || e[1] >= AUTO_MIN_EXTENT {
-                out.push(w);
+        solids.extend(boxes.iter().filter_map(|b| transform_box(b, &m)));
+        out.extend(pieces.iter().filter_map(|p| transform_box(p, &m)));
+    }
+    if !any_tagged && out.is_empty() {
+        for (mesh, m, _) in instances {
+            let pieces = cache
+                .entry(mesh as *const Mesh)
+                .or_insert_with(|| (faces(mesh), Vec::new()));
+            for p in pieces.0.iter() {
+                let Some(w) = transform_box(p, &m) else {
+                    continue;
+                };
+                let s = w.size();
+                let mut e = [s.x, s.y, s.z];
+                e.sort_by(f32::total_cmp);
+                if e[1] >= AUTO_MIN_EXTENT {
+                    out.push(w);
+                }
             }
         }
     }
@@ -240,38 +245,23 @@ pub fn occluder_boxes<'a>(
     }
 }
 
-/// The occluders of an untagged model: every object shaped like a wall (thin horizontally,
-/// at least [`AUTO_MIN_EXTENT`] high and [`MIN_WALL_LENGTH`] long) or a slab (thin vertically,
-/// at least [`AUTO_MIN_EXTENT`] both ways), between [`MIN_WALL_THICKNESS`] and
-/// [`super::cover::MAX_THICKNESS`] thick, with what its triangles cover on both faces.
-/// Furniture, door leaves and glass panes are not walls, so they neither split the cells nor
-/// close the doors.
-pub fn structural<'a>(instances: impl Iterator<Item = (&'a Mesh, Mat4, bool)>) -> Occluders {
-    let mut solids = Vec::new();
-    let mut faces = Vec::new();
-    for (mesh, m, _) in instances {
-        let s = mesh.bounds().transformed(&m).size();
-        let Some(t) = (0..3).min_by(|&a, &b| s[a].total_cmp(&s[b])) else {
-            continue;
-        };
-        let thick = (MIN_WALL_THICKNESS..=super::cover::MAX_THICKNESS).contains(&s[t]);
-        let large = if t == 1 {
-            s.x >= AUTO_MIN_EXTENT && s.z >= AUTO_MIN_EXTENT
-        } else {
-            s.y >= AUTO_MIN_EXTENT && s[2 - t] >= MIN_WALL_LENGTH
-        };
-        if !(thick && large) {
-            continue;
-        }
-        add_covered(mesh, &m, &mut solids, &mut faces);
-    }
-    sort_dedup(&mut faces);
-    sort_dedup(&mut solids);
-    Occluders {
-        faces,
-        solids,
-        rooms: Vec::new(),
-    }
+/// Whether an untagged object is shaped like a wall (thin horizontally, at least
+/// [`AUTO_MIN_EXTENT`] high and [`MIN_WALL_LENGTH`] long) or a slab (thin vertically, at least
+/// [`AUTO_MIN_EXTENT`] both ways), between [`MIN_WALL_THICKNESS`] and
+/// [`super::cover::MAX_THICKNESS`] thick. Furniture, door leaves and glass panes are not, so
+/// they neither split the cells nor close the doors.
+pub fn wall_or_slab(mesh: &Mesh, m: &Mat4) -> bool {
+    let s = mesh.bounds().transformed(m).size();
+    let Some(t) = (0..3).min_by(|&a, &b| s[a].total_cmp(&s[b])) else {
+        return false;
+    };
+    let thick = (MIN_WALL_THICKNESS..=super::cover::MAX_THICKNESS).contains(&s[t]);
+    let large = if t == 1 {
+        s.x >= AUTO_MIN_EXTENT && s.z >= AUTO_MIN_EXTENT
+    } else {
+        s.y >= AUTO_MIN_EXTENT && s[2 - t] >= MIN_WALL_LENGTH
+    };
+    thick && large
 }
 
 /// Adds what a wall or slab covers ([`super::cover::covered`]), snapped to the grid, to

@@ -3,8 +3,10 @@
 //! For each cell and each of its three high faces, the cells on the other side are found
 //! through the k-D tree; on each shared rectangle, the occluder faces lying in that plane are
 //! marked opaque on the grid their edges induce, and the open grid cells are merged into
-//! rectangles: the portals. The cell adjacency graph is the result. Cells left without any
-//! portal (the space inside walls and slabs) are marked dead: no observer can get there.
+//! rectangles: the portals. The cell adjacency graph is the result. Cells wholly inside the
+//! solids ([`super::solid`]), and sealed cells thinner than a person (the space inside walls
+//! and slabs no solid box describes), are marked dead: no observer can get there. A sealed
+//! cell a person fits in is a closed room, and live.
 
 use super::{CellGraph, Portal, touches};
 use crate::geometry::Aabb;
@@ -86,7 +88,8 @@ pub fn find_portals_around(
         }
     }
     // With a single cell there is nothing to connect; otherwise a core cell without portals to
-    // other core cells is sealed space (inside a wall or slab).
+    // other core cells is sealed: the inside of a wall or slab when it is thinner than a person
+    // ([`SEALED_ROOM_MIN`]), else a closed room (a hall without openings), which stays live.
     let cells = graph.cells.len();
     let mut degree = vec![0usize; cells];
     for p in portals
@@ -97,7 +100,8 @@ pub fn find_portals_around(
     }
     let core_cells = outside.iter().filter(|o| !**o).count();
     for c in 0..cells {
-        if !outside[c] && core_cells > 1 && degree[c] == 0 {
+        let thin = graph.cells[c].bounds.size().min_element() < SEALED_ROOM_MIN;
+        if !outside[c] && core_cells > 1 && degree[c] == 0 && thin {
             graph.cells[c].live = false;
         }
     }
@@ -133,28 +137,16 @@ pub fn find_portals_around(
     graph.portals = portals;
 }
 
-/// Whether the box lies inside the union of the solids: its centre and its corners (pulled 10 %
-/// towards the centre) each inside some solid.
+/// Whether the box lies wholly inside the union of the solids ([`super::solid::covered`]:
+/// exact, so a cell with an opening anywhere in it stays live).
 fn inside_solids(b: &Aabb, lookup: &Buckets, solids: &[Aabb]) -> bool {
     let near = lookup.near(b, solids);
-    if near.is_empty() {
-        return false;
-    }
-    let c = b.center();
-    let inside = |p: glam::Vec3| {
-        near.iter()
-            .any(|s| (0..3).all(|k| s.min[k] - 1e-5 <= p[k] && p[k] <= s.max[k] + 1e-5))
-    };
-    inside(c)
-        && (0..8).all(|i| {
-            let corner = glam::Vec3::new(
-                if i & 1 == 0 { b.min[0] } else { b.max[0] },
-                if i & 2 == 0 { b.min[1] } else { b.max[1] },
-                if i & 4 == 0 { b.min[2] } else { b.max[2] },
-            );
-            inside(c + (corner - c) * 0.9)
-        })
+    !near.is_empty() && super::solid::covered(b, &near)
 }
+
+/// A sealed cell (no portal to any other) narrower than this (metres) on some axis is the
+/// inside of a wall or slab that no solid box describes: dead. A wider one is a closed room.
+pub const SEALED_ROOM_MIN: f32 = 0.5;
 
 /// The parts of `rect` (flat along `axis`) not covered by the blockers' projections, as
 /// rectangles: grid cells between blocker edges, merged along rows, then rows merged.

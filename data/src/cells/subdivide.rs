@@ -9,6 +9,11 @@
 //!
 //! Without occluders the subdivision falls back to a regular grid of open cells.
 //!
+//! A leaf that is mostly solid but not wholly (a roof layer with a skylight, a wall layer with a
+//! window no face plane split off) is cut further along the solids' own faces
+//! ([`super::solid::split_plane`]), so that its openings become cells of their own, which the
+//! portals then join to the cells on either side.
+//!
 //! When the model has strays ([`crate::bulk`]), the first splits cut the root along the faces of
 //! the bulk: the space between the bulk and each stray becomes a few cells of its own, never
 //! split further, and only the bulk is subdivided. So the building keeps its cells however far
@@ -34,7 +39,7 @@ const MAX_DEPTH: usize = 64;
 /// walls are simply portals to nowhere). Courtyards and other outside space inside the box
 /// are cells like any other.
 pub fn subdivide(bounds: &Aabb, occluders: &[Aabb]) -> CellGraph {
-    subdivide_around(bounds, bounds, occluders, &[])
+    subdivide_around(bounds, bounds, occluders, &[], &[])
 }
 
 /// [`subdivide`] with the root `bounds` first cut along the faces of `core` (the model's bulk,
@@ -42,11 +47,13 @@ pub fn subdivide(bounds: &Aabb, occluders: &[Aabb]) -> CellGraph {
 /// subdivided further. `rooms` are the boxes of the rooms the source names (IFC spaces): once
 /// no occluder plane splits a cell, it is split along the faces of the rooms in it, so that
 /// rooms without a wall between them (an open kitchen) still get cells of their own; these
-/// splits are open (they occlude nothing).
+/// splits are open (they occlude nothing). A leaf at least half filled by `solids` but not
+/// wholly is cut along the solids' faces until each piece is wholly solid or less than half.
 pub fn subdivide_around(
     bounds: &Aabb,
     core: &Aabb,
     occluders: &[Aabb],
+    solids: &[Aabb],
     rooms: &[Aabb],
 ) -> CellGraph {
     let root = *bounds;
@@ -58,9 +65,10 @@ pub fn subdivide_around(
         grid_fallback: occluders.is_empty(),
     };
     let all: Vec<u32> = (0..occluders.len() as u32).collect();
-    // Explicit stack of (tree node index, box, occluders overlapping it, depth).
-    let mut stack = vec![(0usize, root, all, 0usize)];
-    while let Some((node, b, ids, depth)) = stack.pop() {
+    let all_solids: Vec<u32> = (0..solids.len() as u32).collect();
+    // Explicit stack of (tree node index, box, occluders and solids overlapping it, depth).
+    let mut stack = vec![(0usize, root, all, all_solids, 0usize)];
+    while let Some((node, b, ids, sids, depth)) = stack.pop() {
         let outside = !super::touches(&b, core)
             || (0..3).any(|a| b.max[a] <= core.min[a] || b.min[a] >= core.max[a]);
         let split = if outside {
@@ -70,7 +78,9 @@ pub fn subdivide_around(
         } else if graph.grid_fallback {
             grid_split(&b, core)
         } else if depth < MAX_DEPTH {
-            best_split(&b, &ids, occluders).or_else(|| room_split(&b, rooms))
+            best_split(&b, &ids, occluders)
+                .or_else(|| room_split(&b, rooms))
+                .or_else(|| solid_split(&b, &sids, solids))
         } else {
             None
         };
@@ -88,8 +98,10 @@ pub fn subdivide_around(
                 };
                 let lo_ids = overlapping(&lo_box, &ids, occluders);
                 let hi_ids = overlapping(&hi_box, &ids, occluders);
-                stack.push((lo + 1, hi_box, hi_ids, depth + 1));
-                stack.push((lo, lo_box, lo_ids, depth + 1));
+                let lo_sids = filling(&lo_box, &sids, solids);
+                let hi_sids = filling(&hi_box, &sids, solids);
+                stack.push((lo + 1, hi_box, hi_ids, hi_sids, depth + 1));
+                stack.push((lo, lo_box, lo_ids, lo_sids, depth + 1));
             }
             None => {
                 graph.tree[node] = KdNode::Leaf(graph.cells.len() as u32);
@@ -145,6 +157,31 @@ fn best_split(b: &Aabb, ids: &[u32], occluders: &[Aabb]) -> Option<(usize, f32)>
         })
         .max_by_key(|&(c, bal, axis, bits, _)| (c, bal, std::cmp::Reverse(axis), bits))
         .map(|(_, _, axis, _, at)| (axis, at))
+}
+
+/// A leaf's cut along the faces of the solids in it, when they fill at least half of it but not
+/// all: its open part (a skylight, a window) is then split off from the solid part.
+fn solid_split(b: &Aabb, sids: &[u32], solids: &[Aabb]) -> Option<(usize, f32)> {
+    if sids.is_empty() {
+        return None;
+    }
+    let near: Vec<Aabb> = sids.iter().map(|&i| solids[i as usize]).collect();
+    let whole: f64 = (0..3).map(|k| (b.max[k] - b.min[k]) as f64).product();
+    if super::solid::covered(b, &near) || super::solid::solid_volume(b, &near) < 0.5 * whole {
+        return None;
+    }
+    super::solid::split_plane(b, &near, MIN_THICKNESS)
+}
+
+/// Solids overlapping the box's interior.
+fn filling(b: &Aabb, ids: &[u32], solids: &[Aabb]) -> Vec<u32> {
+    ids.iter()
+        .copied()
+        .filter(|&i| {
+            let s = &solids[i as usize];
+            (0..3).all(|a| overlap(s, b, a) > super::solid::TOLERANCE)
+        })
+        .collect()
 }
 
 /// Rooms' faces closer than this (metres) to a cell's face do not split it.
@@ -296,7 +333,13 @@ pub(crate) mod tests {
     fn a_far_core_is_cut_out_first_and_subdivided_alone() {
         let walls = faces_of(&[bx([5.0, 0.0, 0.0], [5.2, 3.0, 4.0])]);
         let core = bx([0.0; 3], [10.0, 3.0, 4.0]);
-        let far = subdivide_around(&bx([0.0; 3], [3000.0, 3000.0, 3000.0]), &core, &walls, &[]);
+        let far = subdivide_around(
+            &bx([0.0; 3], [3000.0, 3000.0, 3000.0]),
+            &core,
+            &walls,
+            &[],
+            &[],
+        );
         let near = subdivide(&core, &walls);
         // The same cells inside the core, plus one cell per side the root extends past it.
         assert_eq!(far.cells.len(), near.cells.len() + 3);

@@ -52,7 +52,8 @@ pub enum PathKind {
 }
 
 /// Whether the cells have rooms to tour: two or more room-sized live cells joined through
-/// portals, found by occluders (not a grid of open cells, not one box around an object).
+/// portals, or one closed room alone (a hall without openings), found by occluders (not a grid
+/// of open cells, not one box around an object).
 pub fn has_rooms(graph: &CellGraph) -> bool {
     if graph.grid_fallback {
         return false;
@@ -60,7 +61,7 @@ pub fn has_rooms(graph: &CellGraph) -> bool {
     let rooms = (0..graph.cells.len() as u32)
         .filter(|&c| graph.cells[c as usize].live && roomy(graph, c))
         .count();
-    rooms >= 2 && !graph.portals.is_empty()
+    (rooms >= 2 && !graph.portals.is_empty()) || (rooms == 1 && graph.live_cells() == 1)
 }
 
 /// A standard path of `kind` for a model: `graph` its cells (if built), `bounds` and `objects`
@@ -269,7 +270,8 @@ fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rn
         }
     }
     rooms.sort_unstable();
-    let walking = rooms.len() >= 2;
+    // A closed room alone is walked too, between points inside it.
+    let walking = rooms.len() >= 2 || live.len() == 1;
     let (live, through): (Vec<u32>, &dyn Fn(u32) -> bool) = if walking {
         (rooms, &|p| walk[p as usize])
     } else {
@@ -289,6 +291,17 @@ fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rn
     let mut points = vec![stand(at)];
     for _ in 0..legs {
         let target = live[rng.random_range(0..live.len())];
+        if target == at && live.len() == 1 {
+            // One room: to a random point of its floor, half a metre from its walls.
+            let b = &graph.cells[at as usize].bounds;
+            let mut p = stand(at);
+            for k in [0, 2] {
+                let m = (0.5f32).min(0.25 * (b.max[k] - b.min[k]));
+                p[k] = rng.random_range(b.min[k] + m..=b.max[k] - m);
+            }
+            points.push(p);
+            continue;
+        }
         let Some(chain) = portal_chain_by(graph, at, target, through) else {
             continue;
         };
