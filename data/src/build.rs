@@ -5,7 +5,9 @@
 //! written in order, so the same input always gives the same file.
 
 use crate::bake::bake;
+use crate::cells::guard::{GuardReport, guard};
 use crate::cells::occluders::{Occluders, occluder_boxes, transform_box};
+use crate::cells::sight::Triangles;
 use crate::cells::{CellStats, precompute};
 use crate::error::Result;
 use crate::format::writer::{DbWriter, WriteSummary};
@@ -71,6 +73,9 @@ pub struct BuildReport {
     pub visibility_seconds: f64,
     /// Seconds spent clustering and painting impostors.
     pub hierarchy_seconds: f64,
+    /// The visibility guard's rays and repairs ([`crate::cells::guard`]), when cells were
+    /// built.
+    pub guard: Option<GuardReport>,
 }
 
 /// Builds a display database at `out` from an imported model, with average-colour boxes but
@@ -158,10 +163,15 @@ pub fn build_with(
     };
     let hierarchy_seconds = t_h.elapsed().as_secs_f64();
     let mut times = (0.0, 0.0);
+    let mut guarded = None;
     let cells = match &occluders {
-        Some(occ) => Some(write_cells(
-            &mut w, occ, &records, &bounds, obs, &mut times,
-        )?),
+        Some(occ) => {
+            let scene = triangles(&records, &instances, &lods);
+            let (index, report) =
+                write_cells(&mut w, occ, &records, &scene, &bounds, obs, &mut times)?;
+            guarded = Some(report);
+            Some(index)
+        }
         None => None,
     };
     let cell_stats = cells.as_ref().map(|c| c.stats.clone());
@@ -193,7 +203,35 @@ pub fn build_with(
         subdivision_seconds: times.0,
         visibility_seconds: times.1,
         hierarchy_seconds,
+        guard: guarded,
     })
+}
+
+/// Every instance's finest LOD, as shared shapes placed by the instances' transforms, for the
+/// visibility guard.
+fn triangles(
+    records: &[InstanceRecord],
+    instances: &[Instance],
+    lods: &[(String, u32, Vec<LodMesh>)],
+) -> Triangles {
+    let shapes = lods
+        .iter()
+        .map(|(_, _, l)| {
+            l.first().map_or_else(Vec::new, |f| {
+                let p = &f.mesh.vertices;
+                f.mesh
+                    .indices
+                    .chunks_exact(3)
+                    .map(|t| [t[0], t[1], t[2]].map(|i| glam::Vec3::from(p[i as usize].position)))
+                    .collect()
+            })
+        })
+        .collect();
+    Triangles::instanced(
+        records.iter().map(|r| r.bounds).collect(),
+        shapes,
+        instances.iter().map(|i| (i.def, i.transform)).collect(),
+    )
 }
 
 /// What the hierarchy build needs to see of the model.
@@ -300,25 +338,28 @@ fn material_colors(scene: &Scene<'_>, under: &[u32]) -> [[f32; 4]; 6] {
     [[sum[0] / w, sum[1] / w, sum[2] / w, 1.0]; 6]
 }
 
-/// Subdivides into cells, precomputes visibility (Funkhouser §3.2) and writes the cell graph,
-/// the occluders and one stab list per cell.
+/// Subdivides into cells, precomputes visibility (Funkhouser §3.2), guards it with rays against
+/// the objects' own triangles ([`crate::cells::guard`]) and writes the cell graph, the
+/// occluders and one stab list per cell.
 fn write_cells(
     w: &mut DbWriter,
     occluders: &Occluders,
     records: &[InstanceRecord],
+    scene: &Triangles,
     bounds: &Aabb,
     obs: &dyn Observer,
     times: &mut (f64, f64),
-) -> Result<CellIndex> {
+) -> Result<(CellIndex, GuardReport)> {
     let objects: Vec<Aabb> = records.iter().map(|r| r.bounds).collect();
     obs.stage("cells", 1);
-    let pre = precompute(
+    let mut pre = precompute(
         bounds,
         occluders,
         &objects,
         &|name, n| obs.stage(name, n),
         &|| obs.advance(1),
     );
+    let guarded = guard(&pre.graph, &mut pre.stabs, scene, GUARD_SEED);
     let graph_segment = w.add_segment(SegmentKind::CellGraph, &encode_segment(&pre.graph))?;
     let occluder_segment =
         w.add_segment(SegmentKind::Occluders, &encode_segment(&occluders.faces))?;
@@ -335,13 +376,19 @@ fn write_cells(
         })
         .collect::<Result<Vec<_>>>()?;
     *times = (pre.subdivision_seconds, pre.visibility_seconds);
-    Ok(CellIndex {
-        graph_segment,
-        occluder_segment,
-        stab_segments,
-        stats: pre.stats,
-    })
+    Ok((
+        CellIndex {
+            graph_segment,
+            occluder_segment,
+            stab_segments,
+            stats: pre.stats,
+        },
+        guarded,
+    ))
 }
+
+/// The visibility guard's seed: fixed, so the same input always gives the same database.
+const GUARD_SEED: u64 = 0x9047_1C0D;
 
 /// Writes each definition's LODs (unless flattening) and returns the object records.
 fn write_objects(

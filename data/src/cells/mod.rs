@@ -12,10 +12,14 @@
 //!   portals (§4.1.2), and plain frustum culling for comparison.
 //! - [`paged`]: the graph cut along the stab lists for the paged manifest (a frame in the core,
 //!   each cell's reach in its page) and grown back on the client.
+//! - [`guard`]: rays from every live cell at build time; what they see that a stab list lacks
+//!   is added to it, with a warning.
 //! - [`verify`]: a ray-casting checker for false negatives and overestimation, against the
 //!   objects' real triangles ([`sight`]) or the occluder boxes.
 
 pub mod cover;
+#[cfg(feature = "native")]
+pub mod guard;
 pub mod occluders;
 pub mod paged;
 pub mod polytope;

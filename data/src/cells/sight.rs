@@ -5,24 +5,62 @@
 
 use super::verify::slab;
 use crate::geometry::Aabb;
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 
-/// Every object's world-space triangles and bounds.
+/// Every object's triangles and world bounds: its own world-space triangles, or a shape shared
+/// with other objects and the transform that places it (a ray is taken into the shape's
+/// coordinates, where its parameter `t` is the same: the map is affine).
 #[derive(Debug, Clone, Default)]
 pub struct Triangles {
     bounds: Vec<Aabb>,
-    triangles: Vec<Vec<[Vec3; 3]>>,
+    /// Per object: index into `shapes`, and the world-to-shape transform when not the identity.
+    placed: Vec<(u32, Option<Mat4>)>,
+    shapes: Vec<Vec<[Vec3; 3]>>,
 }
 
 impl Triangles {
-    /// Objects given by their bounds and triangles (index = object id).
+    /// Objects given by their bounds and world-space triangles (index = object id).
     pub fn new(bounds: Vec<Aabb>, triangles: Vec<Vec<[Vec3; 3]>>) -> Triangles {
         assert_eq!(
             bounds.len(),
             triangles.len(),
             "one triangle list per object"
         );
-        Triangles { bounds, triangles }
+        Triangles {
+            placed: (0..bounds.len() as u32).map(|i| (i, None)).collect(),
+            bounds,
+            shapes: triangles,
+        }
+    }
+
+    /// Objects placed as instances of shared shapes: `placed[o]` is object `o`'s index into
+    /// `shapes` and its object-to-world transform; `bounds[o]` its world box. Objects whose
+    /// transform cannot be inverted (or is not finite) get no triangles.
+    pub fn instanced(
+        bounds: Vec<Aabb>,
+        shapes: Vec<Vec<[Vec3; 3]>>,
+        placed: Vec<(u32, Mat4)>,
+    ) -> Triangles {
+        assert_eq!(bounds.len(), placed.len(), "one placement per object");
+        let empty = shapes.len() as u32;
+        let mut shapes = shapes;
+        shapes.push(Vec::new());
+        let placed = placed
+            .into_iter()
+            .map(|(s, m)| {
+                let inv = m.inverse();
+                if (s as usize) < shapes.len() && m.determinant() != 0.0 && inv.is_finite() {
+                    (s, (m != Mat4::IDENTITY).then_some(inv))
+                } else {
+                    (empty, None)
+                }
+            })
+            .collect();
+        Triangles {
+            bounds,
+            placed,
+            shapes,
+        }
     }
 
     /// Every instance of a database at its finest LOD, transformed to world space.
@@ -56,18 +94,34 @@ impl Triangles {
                     .collect(),
             );
         }
-        Ok(Triangles { bounds, triangles })
+        Ok(Triangles::new(bounds, triangles))
+    }
+
+    /// Every object's world box (index = object).
+    pub fn bounds(&self) -> &[Aabb] {
+        &self.bounds
     }
 
     /// The object whose triangle `origin + t·dir` hits first for `0 < t ≤ max_t`, if any.
     pub fn first_hit(&self, origin: Vec3, dir: Vec3, max_t: f32) -> Option<u32> {
-        let mut near: Vec<(f32, u32)> = self
-            .bounds
+        let all: Vec<u32> = (0..self.bounds.len() as u32).collect();
+        self.nearest(&all, origin, dir, max_t).map(|(_, o)| o)
+    }
+
+    /// Among `candidates`, the object whose triangle `origin + t·dir` hits first for
+    /// `0 < t ≤ max_t`, with that `t`.
+    pub fn nearest(
+        &self,
+        candidates: &[u32],
+        origin: Vec3,
+        dir: Vec3,
+        max_t: f32,
+    ) -> Option<(f32, u32)> {
+        let mut near: Vec<(f32, u32)> = candidates
             .iter()
-            .enumerate()
-            .filter_map(|(o, b)| {
-                let (t0, t1) = slab(origin, dir, b)?;
-                (t1 >= 0.0 && t0 <= max_t).then_some((t0.max(0.0), o as u32))
+            .filter_map(|&o| {
+                let (t0, t1) = slab(origin, dir, self.bounds.get(o as usize)?)?;
+                (t1 >= 0.0 && t0 <= max_t).then_some((t0.max(0.0), o))
             })
             .collect();
         near.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
@@ -76,8 +130,13 @@ impl Triangles {
             if best.is_some_and(|(t, _)| t < enter) {
                 break; // every later box starts beyond the nearest hit
             }
-            for tri in &self.triangles[o as usize] {
-                if let Some(t) = hit(origin, dir, tri)
+            let (shape, to_shape) = self.placed[o as usize];
+            let (so, sd) = match to_shape {
+                Some(m) => (m.transform_point3(origin), m.transform_vector3(dir)),
+                None => (origin, dir),
+            };
+            for tri in &self.shapes[shape as usize] {
+                if let Some(t) = hit(so, sd, tri)
                     && t <= max_t
                     && best.is_none_or(|(b, _)| t < b)
                 {
@@ -85,7 +144,7 @@ impl Triangles {
                 }
             }
         }
-        best.map(|(_, o)| o)
+        best
     }
 }
 

@@ -146,7 +146,8 @@ fn verify_with(
     report
 }
 
-fn random_direction(rng: &mut ChaCha8Rng) -> Vec3 {
+/// A direction uniform on the sphere.
+pub(crate) fn random_direction(rng: &mut ChaCha8Rng) -> Vec3 {
     loop {
         let v = Vec3::new(
             rng.random_range(-1.0f32..1.0),
