@@ -307,28 +307,44 @@ impl Grid {
     }
 }
 
-/// The edges of a face's outline, openings included: the edges only one of its triangles has
-/// (endpoints matched to 0.1 mm).
+/// The edges of a face's outline, openings included: every edge (endpoints matched to 0.1 mm)
+/// not covered on both of its sides. An edge that triangles touch from one side only is on the
+/// outline however many touch it: a face written twice (a two-sided export's reversed copy),
+/// folded or overlapping triangles, and a T-junction's long edge all stay outline edges, so the
+/// cells they cross are opened (conservative), never closed.
 fn boundary(tris: &[[Vec2; 3]]) -> Vec<(Vec2, Vec2)> {
     let key = |p: Vec2| ((p.x * 1e4).round() as i64, (p.y * 1e4).round() as i64);
     /// An edge by its endpoints on a 0.1 mm grid, the lower first.
     type EdgeKey = ((i64, i64), (i64, i64));
-    let mut count: std::collections::HashMap<EdgeKey, (u32, Vec2, Vec2)> =
+    // Per edge: triangles on its left and on its right (seen from the lower endpoint), and the
+    // edge itself.
+    let mut sides: std::collections::HashMap<EdgeKey, (u32, u32, Vec2, Vec2)> =
         std::collections::HashMap::new();
     for t in tris {
-        for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
+        for (a, b, c) in [(t[0], t[1], t[2]), (t[1], t[2], t[0]), (t[2], t[0], t[1])] {
             let (ka, kb) = (key(a), key(b));
             if ka == kb {
                 continue;
             }
-            let k = if ka < kb { (ka, kb) } else { (kb, ka) };
-            count.entry(k).or_insert((0, a, b)).0 += 1;
+            let (k, from, to) = if ka < kb {
+                ((ka, kb), a, b)
+            } else {
+                ((kb, ka), b, a)
+            };
+            let e = sides.entry(k).or_insert((0, 0, from, to));
+            let side = (to - from).perp_dot(c - from);
+            // A degenerate triangle (its third vertex on the edge) covers neither side.
+            if side > 1e-12 {
+                e.0 += 1;
+            } else if side < -1e-12 {
+                e.1 += 1;
+            }
         }
     }
-    let mut out: Vec<(Vec2, Vec2)> = count
+    let mut out: Vec<(Vec2, Vec2)> = sides
         .into_values()
-        .filter(|(n, _, _)| *n == 1)
-        .map(|(_, a, b)| (a, b))
+        .filter(|(left, right, _, _)| (*left == 0) != (*right == 0))
+        .map(|(_, _, a, b)| (a, b))
         .collect();
     out.sort_by(|x, y| {
         [x.0.x, x.0.y, x.1.x, x.1.y]
@@ -535,6 +551,35 @@ mod tests {
                 .any(|b| (0..3).all(|a| b.min[a] < p[a] && p[a] < b.max[a]));
             assert!(!blocked, "the vent is closed at {p}");
         }
+    }
+
+    #[test]
+    fn a_vent_stays_open_when_every_face_is_written_twice() {
+        // SketchUp-style two-sided export: each triangle again, reversed. Every edge then has
+        // two triangles, but all on one side of it: still the outline.
+        let mut wall = prisms(&[
+            &[[0.0, 0.0], [4.4, 0.0], [4.4, 3.0], [0.0, 3.0]],
+            &[[4.9, 0.0], [10.0, 0.0], [10.0, 3.0], [4.9, 3.0]],
+            &[[4.4, 0.0], [4.9, 0.0], [4.9, 2.07], [4.4, 2.07]],
+            &[[4.4, 2.07], [4.65, 2.24], [4.65, 3.0], [4.4, 3.0]],
+            &[[4.65, 2.24], [4.9, 2.07], [4.9, 3.0], [4.65, 3.0]],
+        ]);
+        let twice: Vec<u32> = wall
+            .indices
+            .chunks_exact(3)
+            .flat_map(|t| [t[0], t[2], t[1]])
+            .collect();
+        wall.indices.extend(twice);
+        let (solids, _) = covered(&wall, &Mat4::IDENTITY).unwrap();
+        let p = Vec3::new(4.65, 2.15, 0.1);
+        assert!(
+            !solids
+                .iter()
+                .any(|b| (0..3).all(|a| b.min[a] < p[a] && p[a] < b.max[a])),
+            "the vent is closed"
+        );
+        let area: f32 = solids.iter().map(|b| b.size().x * b.size().y).sum();
+        assert!(area > 25.0 && area < 30.0, "solid area {area}");
     }
 
     #[test]
