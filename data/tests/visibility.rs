@@ -1,0 +1,544 @@
+//! Visibility on real buildings: the cases in `tests/cases/visibility/` (its README says what
+//! each was and what is right), the build's visibility guard, and a property test that the
+//! precompute alone is conservative on walls and slabs of any triangulation with holes of any
+//! shape (Funkhouser §4.1: every visible object in the set).
+
+use glam::{Mat4, Vec3};
+use portico_data::Database;
+use portico_data::build::{BuildOptions, BuildReport, Quiet, build};
+use portico_data::cells::guard::guard;
+use portico_data::cells::occluders::occluder_boxes;
+use portico_data::cells::sight::Triangles;
+use portico_data::cells::verify::verify_against_triangles;
+use portico_data::cells::{CellGraph, StabList, precompute};
+use portico_data::geometry::{Aabb, Mesh, Vertex};
+use portico_data::import::import_file;
+use portico_data::model::Model;
+use portico_data::path::{PathKind, standard};
+use proptest::prelude::*;
+use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
+use std::path::{Path, PathBuf};
+
+fn case(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/cases")
+        .join(name)
+}
+
+/// A case built as `portico build --no-hierarchy` does, with its cells read back.
+struct Built {
+    report: BuildReport,
+    graph: CellGraph,
+    stabs: Vec<StabList>,
+    db: Database,
+    model: Model,
+    _dir: tempfile::TempDir,
+}
+
+fn build_model(model: Model) -> Built {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("case.portico");
+    let opts = BuildOptions {
+        no_hierarchy: true,
+        ..BuildOptions::default()
+    };
+    let report = build(model.clone(), &out, &opts, &Quiet).unwrap();
+    let db = Database::open(&out).unwrap();
+    let graph = db.cell_graph().unwrap().expect("cells");
+    let stabs = (0..graph.cells.len() as u32)
+        .map(|c| db.stab_list(c).unwrap())
+        .collect();
+    Built {
+        report,
+        graph,
+        stabs,
+        db,
+        model,
+        _dir: dir,
+    }
+}
+
+fn build_case(name: &str) -> Built {
+    build_model(import_file(&case(name)).unwrap_or_else(|e| panic!("{name}: {e}")))
+}
+
+impl Built {
+    /// (cells, live cells, portals).
+    fn counts(&self) -> (u64, u64, u64) {
+        let c = self.report.cells.as_ref().unwrap();
+        (c.cells, c.live_cells, c.portals)
+    }
+
+    /// False negatives of `portico verify --rays N` against the objects' own triangles.
+    fn false_negatives(&self, rays: u64) -> u64 {
+        let scene = Triangles::of_database(&self.db).unwrap();
+        verify_against_triangles(&self.graph, &self.stabs, &scene, rays, 7).false_negatives
+    }
+
+    fn instance(&self, name: &str) -> u32 {
+        self.model
+            .instances
+            .iter()
+            .position(|i| i.name == name)
+            .unwrap_or_else(|| panic!("no instance {name}")) as u32
+    }
+
+    /// The standard tour's kind and whether every keyframe's eye is inside `inside`.
+    fn tour_inside(&self, inside: &Aabb) -> (String, bool) {
+        let objects: Vec<Aabb> = self
+            .db
+            .header()
+            .instances
+            .iter()
+            .map(|i| i.bounds)
+            .collect();
+        let p = standard(
+            Some(&self.graph),
+            &self.db.header().bounds,
+            &objects,
+            PathKind::Tour,
+            6,
+            1,
+            1.5,
+            1.0,
+        )
+        .unwrap();
+        let all = p.keyframes.iter().all(|k| {
+            (0..3).all(|a| inside.min[a] - 1e-3 <= k.eye[a] && k.eye[a] <= inside.max[a] + 1e-3)
+        });
+        (p.kind, all && !p.keyframes.is_empty())
+    }
+}
+
+/// The two-room house's box: (0, −0.2, 0)–(10, 3.2, 8) m.
+fn house_box() -> Aabb {
+    Aabb {
+        min: [0.0, -0.2, 0.0],
+        max: [10.0, 3.2, 8.0],
+    }
+}
+
+#[test]
+fn a_skylight_cut_into_a_roof_is_seen_from_the_rooms_below() {
+    let b = build_case("visibility/roof-skylight.ifc");
+    assert_eq!(b.false_negatives(20_000), 0);
+    // The hole is a cell and a portal to the layer above the roof, as with the boxes control.
+    let control = build_case("visibility/roof-skylight-boxes.gltf");
+    assert_eq!(control.counts(), (17, 5, 4));
+    assert_eq!(control.false_negatives(20_000), 0);
+    assert_eq!(b.counts(), (17, 5, 4));
+    // Both rooms list the skylight, and the precompute found it (the guard repaired nothing).
+    let skylight = b.instance("Skylight");
+    // IFC is Z up: its y becomes −z.
+    for room in [Vec3::new(2.5, 1.5, -2.5), Vec3::new(7.5, 1.5, -2.5)] {
+        let c = b.graph.locate(room).unwrap();
+        assert!(
+            b.stabs[c as usize].objects().contains(&skylight),
+            "cell {c}"
+        );
+    }
+    assert_eq!(b.report.guard.as_ref().unwrap().repaired, vec![]);
+}
+
+#[test]
+fn a_house_on_a_ground_plane_keeps_its_own_cells_and_is_toured_inside() {
+    let b = build_case("visibility/house-on-ground-60m.obj");
+    let c = b.report.cells.as_ref().unwrap();
+    assert_eq!((c.live_cells, c.portals), (3, 2), "{c:?}");
+    assert_eq!(b.false_negatives(20_000), 0);
+    assert_eq!(b.tour_inside(&house_box()), ("tour".into(), true));
+}
+
+/// The house of `import/house.obj` on a 400 × 400 m hilly terrain, 5 m between its vertices,
+/// flat around the house and up to about 12 m high at the edges.
+fn house_on_terrain(dir: &Path) -> PathBuf {
+    let mut obj = std::fs::read_to_string(case("import/house.obj")).unwrap();
+    let base = obj.lines().filter(|l| l.starts_with("v ")).count();
+    obj.push_str("\no ground\n");
+    let n = 81;
+    for j in 0..n {
+        for i in 0..n {
+            let (x, z) = (-195.0 + 5.0 * i as f32, -196.0 + 5.0 * j as f32);
+            let d = ((x - 5.0).powi(2) + (z - 4.0).powi(2)).sqrt();
+            let hills = 6.0 * (1.0 - (-(d / 80.0).powi(2)).exp()) * (2.0 + (x / 40.0).sin());
+            obj.push_str(&format!("v {x} {} {z}\n", hills - 0.21));
+        }
+    }
+    for j in 0..n - 1 {
+        for i in 0..n - 1 {
+            let v = |a: usize, b: usize| base + 1 + b * n + a;
+            let (a, b, c, d) = (v(i, j), v(i + 1, j), v(i + 1, j + 1), v(i, j + 1));
+            obj.push_str(&format!("f {a} {d} {c}\nf {a} {c} {b}\n"));
+        }
+    }
+    let path = dir.join("house-on-terrain.obj");
+    std::fs::write(&path, obj).unwrap();
+    path
+}
+
+#[test]
+fn a_house_on_hilly_terrain_keeps_its_own_cells_and_is_toured_inside() {
+    let dir = tempfile::tempdir().unwrap();
+    let m = import_file(&house_on_terrain(dir.path())).unwrap();
+    let ground = m.instances.iter().position(|i| i.name == "ground").unwrap();
+    let boxes: Vec<Aabb> = m
+        .instances
+        .iter()
+        .map(|i| {
+            m.defs[i.def as usize].lods[0]
+                .bounds()
+                .transformed(&i.transform)
+        })
+        .collect();
+    assert!(boxes[ground].size().y > 10.0, "{:?}", boxes[ground]);
+    let around = portico_data::cells::surroundings(&boxes);
+    assert_eq!(
+        around.iter().positions(),
+        vec![ground],
+        "only the terrain surrounds the house"
+    );
+    let b = build_model(m);
+    let c = b.report.cells.as_ref().unwrap();
+    assert_eq!((c.live_cells, c.portals), (3, 2), "{c:?}");
+    assert_eq!(b.false_negatives(5_000), 0);
+    assert_eq!(b.tour_inside(&house_box()), ("tour".into(), true));
+}
+
+/// Positions of the `true`s.
+trait Positions {
+    fn positions(self) -> Vec<usize>;
+}
+
+impl<'a, I: Iterator<Item = &'a bool>> Positions for I {
+    fn positions(self) -> Vec<usize> {
+        self.enumerate()
+            .filter(|(_, b)| **b)
+            .map(|(i, _)| i)
+            .collect()
+    }
+}
+
+#[test]
+fn walls_exported_as_proxies_occlude_like_walls() {
+    let b = build_case("visibility/outer-walls-as-proxies.ifc");
+    assert_eq!(b.counts(), (12, 3, 2));
+    assert_eq!(b.false_negatives(20_000), 0);
+}
+
+#[test]
+fn a_closed_hall_is_a_live_cell_and_the_tour_walks_inside_it() {
+    let b = build_case("visibility/hall-600-mapped-chairs.ifc");
+    let c = b.report.cells.as_ref().unwrap();
+    assert_eq!(c.live_cells, 1, "{c:?}");
+    let hall = b.graph.cells.iter().find(|c| c.live).unwrap().bounds;
+    let s = hall.size();
+    assert!(s.x > 25.0 && s.z > 15.0, "{hall:?}");
+    // Every chair is listed: the hall sees all of them.
+    let live = b.graph.cells.iter().position(|c| c.live).unwrap();
+    assert_eq!(
+        b.stabs[live].objects().len(),
+        b.model.instances.len(),
+        "objects in the hall's list"
+    );
+    let (kind, inside) = b.tour_inside(&hall);
+    assert_eq!((kind.as_str(), inside), ("tour", true));
+}
+
+/// The house's model as triangles for the guard: each instance's finest mesh, placed.
+fn scene_of(m: &Model) -> Triangles {
+    let shapes = m
+        .defs
+        .iter()
+        .map(|d| {
+            let p = &d.lods[0].vertices;
+            d.lods[0]
+                .indices
+                .chunks_exact(3)
+                .map(|t| [t[0], t[1], t[2]].map(|i| Vec3::from(p[i as usize].position)))
+                .collect()
+        })
+        .collect();
+    let bounds = m
+        .instances
+        .iter()
+        .map(|i| {
+            m.defs[i.def as usize].lods[0]
+                .bounds()
+                .transformed(&i.transform)
+        })
+        .collect();
+    Triangles::instanced(
+        bounds,
+        shapes,
+        m.instances.iter().map(|i| (i.def, i.transform)).collect(),
+    )
+}
+
+#[test]
+fn the_build_guard_finds_and_repairs_a_planted_false_negative() {
+    let m = import_file(&case("import/house.obj")).unwrap();
+    let occ = occluder_boxes(
+        m.instances
+            .iter()
+            .map(|i| (&m.defs[i.def as usize].lods[0], i.transform, i.occluder)),
+    );
+    let scene = scene_of(&m);
+    let objects = scene.bounds().to_vec();
+    let mut p = precompute(&m.bounds(), &occ, &objects, &|_, _| {}, &|| {});
+    let clean = guard(&p.graph, &mut p.stabs, &scene, 1);
+    assert!(clean.repaired.is_empty(), "{:?}", clean.repaired);
+    assert!(clean.rays >= 3 * 8);
+    // Plant a false negative: the table disappears from its own room's list.
+    let table = m.instances.iter().position(|i| i.name == "table").unwrap() as u32;
+    let room = p
+        .graph
+        .locate(Vec3::from(objects[table as usize].center()) + Vec3::Y)
+        .unwrap();
+    for e in &mut p.stabs[room as usize].entries {
+        e.objects.retain(|&o| o != table);
+    }
+    assert!(!p.stabs[room as usize].objects().contains(&table));
+    let fixed = guard(&p.graph, &mut p.stabs, &scene, 1);
+    assert_eq!(fixed.repaired, vec![(room, table)]);
+    // In the source cell's own entry, which the client filters by the frustum alone.
+    assert_eq!(p.stabs[room as usize].entries[0].cell, room);
+    assert!(p.stabs[room as usize].entries[0].objects.contains(&table));
+    let r = verify_against_triangles(&p.graph, &p.stabs, &scene, 20_000, 3);
+    assert_eq!(r.false_negatives, 0);
+}
+
+/// A face `w × h` (in its own u, v) with convex holes, triangulated as a CSG kernel might: a
+/// constrained Delaunay triangulation of the outline and the holes' rims with `extra` points
+/// inside (fans, slivers, long thin triangles), holes left out.
+fn holed_face(w: f64, h: f64, holes: &[Vec<[f64; 2]>], extra: &[[f64; 2]]) -> Vec<[[f32; 2]; 3]> {
+    let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
+    let mut ring = |pts: &[[f64; 2]]| {
+        let hs: Vec<_> = pts
+            .iter()
+            .map(|p| cdt.insert(Point2::new(p[0], p[1])).unwrap())
+            .collect();
+        for k in 0..hs.len() {
+            cdt.add_constraint(hs[k], hs[(k + 1) % hs.len()]);
+        }
+    };
+    ring(&[[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]]);
+    for hole in holes {
+        ring(hole);
+    }
+    for p in extra {
+        let inside_hole = holes.iter().any(|hole| in_convex(hole, *p, 0.02));
+        if !inside_hole {
+            let _ = cdt.insert(Point2::new(p[0], p[1]));
+        }
+    }
+    cdt.inner_faces()
+        .map(|f| f.vertices().map(|v| [v.position().x, v.position().y]))
+        .filter(|t| {
+            let c = [
+                (t[0][0] + t[1][0] + t[2][0]) / 3.0,
+                (t[0][1] + t[1][1] + t[2][1]) / 3.0,
+            ];
+            !holes.iter().any(|hole| in_convex(hole, c, 0.0))
+        })
+        .map(|t| t.map(|p| [p[0] as f32, p[1] as f32]))
+        .collect()
+}
+
+/// Whether `p` lies inside the convex polygon (counter-clockwise), `margin` inside its edges.
+fn in_convex(poly: &[[f64; 2]], p: [f64; 2], margin: f64) -> bool {
+    (0..poly.len()).all(|k| {
+        let (a, b) = (poly[k], poly[(k + 1) % poly.len()]);
+        let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
+        let cross = ex * (p[1] - a[1]) - ey * (p[0] - a[0]);
+        cross > margin * (ex * ex + ey * ey).sqrt()
+    })
+}
+
+/// A slab between `lo` and `hi` along axis `t`, its faces `faces[0]` and `faces[1]` (in the
+/// other two axes, u then v) and closed all round along the outline and every hole's rim.
+/// `twice` writes each face triangle again, reversed (a two-sided export).
+fn slab_mesh(
+    t: usize,
+    (lo, hi): (f32, f32),
+    faces: [&[[[f32; 2]; 3]]; 2],
+    rims: &[Vec<[f64; 2]>],
+    twice: bool,
+) -> Mesh {
+    let (u, v) = ((t + 1) % 3, (t + 2) % 3);
+    let at = |q: [f32; 2], w: f32| {
+        let mut p = [0.0f32; 3];
+        (p[u], p[v], p[t]) = (q[0], q[1], w);
+        Vertex::new(p, [0.0, 1.0, 0.0], [0.6, 0.6, 0.6, 1.0])
+    };
+    let mut vertices = Vec::new();
+    let mut indices = Vec::new();
+    let mut tri = |a: Vertex, b: Vertex, c: Vertex, both: bool| {
+        let n = vertices.len() as u32;
+        vertices.extend([a, b, c]);
+        indices.extend([n, n + 1, n + 2]);
+        if both {
+            indices.extend([n, n + 2, n + 1]);
+        }
+    };
+    for (face, w) in faces.iter().zip([lo, hi]) {
+        for f in face.iter() {
+            tri(at(f[0], w), at(f[1], w), at(f[2], w), twice);
+        }
+    }
+    for rim in rims {
+        for k in 0..rim.len() {
+            let (a, b) = (rim[k], rim[(k + 1) % rim.len()]);
+            let (a, b) = ([a[0] as f32, a[1] as f32], [b[0] as f32, b[1] as f32]);
+            tri(at(a, lo), at(b, lo), at(b, hi), false);
+            tri(at(a, lo), at(b, hi), at(a, hi), false);
+        }
+    }
+    Mesh {
+        vertices,
+        indices,
+        uvs: Vec::new(),
+    }
+}
+
+/// A random convex hole: `n` corners on a circle of radius `r` around `c`, turned by `turn`,
+/// counter-clockwise.
+fn hole(c: [f64; 2], r: f64, n: usize, turn: f64) -> Vec<[f64; 2]> {
+    (0..n)
+        .map(|k| {
+            let a = turn + std::f64::consts::TAU * k as f64 / n as f64;
+            [c[0] + r * a.cos(), c[1] + r * a.sin()]
+        })
+        .collect()
+}
+
+/// One random wall (`t` = 0: across x, 0.2 m thick, in a 10 × 3 × 8 m box) or slab (`t` = 1:
+/// across y at 1.5 m, in a 8 × 3.5 × 8 m box) with holes, a cube just behind each hole and
+/// more scattered on both sides; the precompute alone must list everything a ray sees.
+fn wall_with_holes_is_conservative(
+    t: usize,
+    slots: &[(bool, f64, usize, f64, f64, f64)],
+    extra: &[[f64; 2]],
+    twice: bool,
+) -> Result<(), TestCaseError> {
+    let (bounds, (lo, hi), (w, h)) = if t == 0 {
+        (
+            Aabb {
+                min: [0.0; 3],
+                max: [10.0, 3.0, 8.0],
+            },
+            (5.0f32, 5.2f32),
+            (3.0f64, 8.0f64), // u = y, v = z
+        )
+    } else {
+        (
+            Aabb {
+                min: [0.0; 3],
+                max: [8.0, 3.5, 8.0],
+            },
+            (1.5, 1.7),
+            (8.0, 8.0), // u = z, v = x
+        )
+    };
+    // Holes in a row of slots along v, each inside its own slot, clear of the outline.
+    let slot = h / slots.len() as f64;
+    let mut holes = Vec::new();
+    for (k, &(used, r, n, turn, du, dv)) in slots.iter().enumerate() {
+        if !used {
+            continue;
+        }
+        let r = r.min(0.4 * slot).min(0.4 * w);
+        let c = [
+            r + 0.05 + du * (w - 2.0 * r - 0.1),
+            slot * k as f64 + r + 0.05 + dv * (slot - 2.0 * r - 0.1),
+        ];
+        holes.push(hole(c, r, n, turn));
+    }
+    let scale = |p: &[f64; 2]| [p[0] * w, p[1] * h];
+    let e0: Vec<[f64; 2]> = extra.iter().step_by(2).map(scale).collect();
+    let e1: Vec<[f64; 2]> = extra.iter().skip(1).step_by(2).map(scale).collect();
+    let (f0, f1) = (holed_face(w, h, &holes, &e0), holed_face(w, h, &holes, &e1));
+    let mut rims = holes.clone();
+    rims.push(vec![[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]]);
+    let slab = slab_mesh(t, (lo, hi), [&f0, &f1], &rims, twice);
+    // Cubes 0.3 m across: one 0.4 m beyond each hole's centre, and a row on either side.
+    let (u, v) = ((t + 1) % 3, (t + 2) % 3);
+    let mut cubes = Vec::new();
+    for hole in &holes {
+        let c = hole
+            .iter()
+            .fold([0.0, 0.0], |s, p| [s[0] + p[0], s[1] + p[1]]);
+        let mut p = [0.0f32; 3];
+        p[u] = (c[0] / hole.len() as f64) as f32;
+        p[v] = (c[1] / hole.len() as f64) as f32;
+        p[t] = hi + 0.4;
+        cubes.push(Vec3::from(p));
+    }
+    for k in 0..6 {
+        let mut p = bounds.center().to_array();
+        p[v] = bounds.min[v] + (k as f32 + 0.5) * (bounds.max[v] - bounds.min[v]) / 6.0;
+        p[u] = bounds.min[u] + 0.3 + 0.4 * (bounds.max[u] - bounds.min[u]) * (k % 2) as f32;
+        p[t] = if k < 3 { lo - 1.0 } else { hi + 1.5 };
+        cubes.push(Vec3::from(p));
+    }
+    let cube = portico_data::lod::box_mesh(
+        &Aabb {
+            min: [-0.15; 3],
+            max: [0.15; 3],
+        },
+        [0.8, 0.2, 0.2, 1.0],
+    );
+    let mut meshes = vec![(slab, Mat4::IDENTITY, true)];
+    meshes.extend(
+        cubes
+            .iter()
+            .map(|c| (cube.clone(), Mat4::from_translation(*c), false)),
+    );
+    let occ = occluder_boxes(meshes.iter().map(|(m, x, tag)| (m, *x, *tag)));
+    let world: Vec<Vec<[Vec3; 3]>> = meshes
+        .iter()
+        .map(|(m, x, _)| {
+            m.indices
+                .chunks_exact(3)
+                .map(|i| {
+                    i.iter()
+                        .map(|&k| x.transform_point3(Vec3::from(m.vertices[k as usize].position)))
+                })
+                .map(|mut p| [p.next().unwrap(), p.next().unwrap(), p.next().unwrap()])
+                .collect()
+        })
+        .collect();
+    let boxes: Vec<Aabb> = meshes
+        .iter()
+        .map(|(m, x, _)| m.bounds().transformed(x))
+        .collect();
+    let p = precompute(&bounds, &occ, &boxes, &|_, _| {}, &|| {});
+    let scene = Triangles::new(boxes, world);
+    let r = verify_against_triangles(&p.graph, &p.stabs, &scene, 12_000, 11);
+    prop_assert_eq!(
+        r.false_negatives,
+        0,
+        "{} holes, examples {:?}, {} occluder faces, {} solids",
+        holes.len(),
+        r.false_negative_examples,
+        occ.faces.len(),
+        occ.solids.len()
+    );
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 10, .. ProptestConfig::default() })]
+
+    #[test]
+    fn walls_and_slabs_of_any_triangulation_with_holes_hide_nothing(
+        slab in any::<bool>(),
+        slots in prop::collection::vec(
+            (any::<bool>(), 0.08f64..0.7, 3usize..9, 0.0f64..6.3, 0.0f64..1.0, 0.0f64..1.0),
+            2..5,
+        ),
+        extra in prop::collection::vec([0.001f64..0.999, 0.001f64..0.999], 0..24),
+        twice in any::<bool>(),
+    ) {
+        wall_with_holes_is_conservative(if slab { 1 } else { 0 }, &slots, &extra, twice)?;
+    }
+}
