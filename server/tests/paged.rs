@@ -165,3 +165,38 @@ async fn pages_are_gzip_coded_and_bad_cells_get_one_line_errors() {
     // The server still serves.
     assert_eq!(get(&http, &url(&live.to_string())).await.status(), 200);
 }
+
+/// Pages are cut along the stab lists: a database without cells has none, and a client that
+/// started from its core would never learn an instance (its walk drew nothing). The core is
+/// refused, so clients read the whole manifest, which holds every instance.
+#[tokio::test]
+async fn a_database_without_cells_has_no_core_and_its_whole_manifest_lists_everything() {
+    let dir = tempfile::tempdir().unwrap();
+    let tiny = portico_data::Database::open(common::db_path()).unwrap();
+    let instances = tiny.header().instances.len();
+    let glb = common::db_path().with_file_name("tiny.glb");
+    let out = dir.path().join("no-cells.portico");
+    let opts = portico_data::build::BuildOptions {
+        no_cells: true,
+        no_hierarchy: true,
+        ..Default::default()
+    };
+    let model = portico_data::import::import_file(&glb).unwrap();
+    portico_data::build::build(model, &out, &opts, &portico_data::build::Quiet).unwrap();
+    let s = common::start_on(&out, Config::default()).await;
+    let http = reqwest::Client::new();
+    let r = get(&http, &format!("{}/v1/manifest/core", s.base)).await;
+    assert_eq!(r.status(), 404);
+    let e: ApiError = r.json().await.unwrap();
+    assert!(e.message.contains("no cells"), "{}", e.message);
+    let whole: Manifest<Header> = portico_protocol::manifest_from_bincode(
+        &get(&http, &format!("{}/v1/manifest", s.base))
+            .await
+            .bytes()
+            .await
+            .unwrap(),
+    )
+    .unwrap();
+    assert_eq!(whole.header.instances.len(), instances);
+    assert!(whole.header.cells.is_none());
+}
