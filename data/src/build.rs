@@ -360,6 +360,9 @@ fn write_cells(
         &|| obs.advance(1),
     );
     let guarded = guard(&pre.graph, &mut pre.stabs, scene, GUARD_SEED);
+    if !guarded.repaired.is_empty() {
+        pre.stats = crate::cells::stats(&pre.graph, &pre.stabs, occluders.faces.len());
+    }
     let graph_segment = w.add_segment(SegmentKind::CellGraph, &encode_segment(&pre.graph))?;
     let occluder_segment =
         w.add_segment(SegmentKind::Occluders, &encode_segment(&occluders.faces))?;

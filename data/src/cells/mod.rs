@@ -469,7 +469,9 @@ fn core_of(bounds: &Aabb, objects: &[Aabb]) -> Aabb {
 }
 
 #[cfg(feature = "native")]
-fn stats(graph: &CellGraph, stabs: &[StabList], occluder_boxes: usize) -> CellStats {
+/// Table 3.2's statistics of a graph and its stab lists (again after the build's guard
+/// ([`guard`]) added to them).
+pub fn stats(graph: &CellGraph, stabs: &[StabList], occluder_boxes: usize) -> CellStats {
     let live: Vec<usize> = (0..graph.cells.len())
         .filter(|&i| graph.cells[i].live)
         .collect();
@@ -493,5 +495,38 @@ fn stats(graph: &CellGraph, stabs: &[StabList], occluder_boxes: usize) -> CellSt
         objects_partial: mean_max(&|i| stabs[i].partial.len() as u64),
         cells_visible: mean_max(&|i| stabs[i].entries.len() as u64),
         objects_visible: mean_max(&|i| stabs[i].objects().len() as u64),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bx(min: [f32; 3], max: [f32; 3]) -> Aabb {
+        Aabb { min, max }
+    }
+
+    #[test]
+    fn ground_planes_and_domes_surround_a_building_and_its_own_slabs_do_not() {
+        let house = vec![
+            bx([0.0, -0.2, 0.0], [10.0, 0.0, 8.0]), // floor slab
+            bx([0.0, 0.0, 0.0], [10.0, 3.0, 0.2]),  // a wall
+            bx([0.0, 3.0, 0.0], [10.0, 3.2, 8.0]),  // roof
+            bx([2.0, 0.0, 2.0], [3.0, 1.0, 3.0]),   // a table
+        ];
+        assert_eq!(surroundings(&house), vec![false; 4]);
+        let mut site = house.clone();
+        site.push(bx([-25.0, -0.21, -26.0], [35.0, -0.21, 34.0])); // 60 m ground
+        site.push(bx([-500.0, -500.0, -500.0], [500.0, 500.0, 500.0])); // sky dome
+        assert_eq!(
+            surroundings(&site),
+            vec![false, false, false, false, true, true]
+        );
+        // A tall tower on a plinth twice its width is a building, not a site.
+        let tower = vec![
+            bx([0.0, 0.0, 0.0], [20.0, 1.0, 20.0]),
+            bx([5.0, 1.0, 5.0], [15.0, 100.0, 15.0]),
+        ];
+        assert_eq!(surroundings(&tower), vec![false, false]);
     }
 }

@@ -61,7 +61,21 @@ pub fn has_rooms(graph: &CellGraph) -> bool {
     let rooms = (0..graph.cells.len() as u32)
         .filter(|&c| graph.cells[c as usize].live && roomy(graph, c))
         .count();
-    (rooms >= 2 && !graph.portals.is_empty()) || (rooms == 1 && graph.live_cells() == 1)
+    (rooms >= 2 && !graph.portals.is_empty()) || closed_room(graph).is_some()
+}
+
+/// The one live cell of a model that is a closed room: room-sized, without portals, and walled
+/// in on every side (it does not reach the model's box anywhere, as the whole box of an
+/// object's grid cell would).
+fn closed_room(graph: &CellGraph) -> Option<u32> {
+    let mut live = (0..graph.cells.len() as u32).filter(|&c| graph.cells[c as usize].live);
+    let (c, None) = (live.next()?, live.next()) else {
+        return None;
+    };
+    let b = &graph.cells[c as usize].bounds;
+    let inside = (0..3)
+        .all(|k| b.min[k] > graph.bounds.min[k] + 0.01 && b.max[k] < graph.bounds.max[k] - 0.01);
+    (roomy(graph, c) && graph.cells[c as usize].portals.is_empty() && inside).then_some(c)
 }
 
 /// A standard path of `kind` for a model: `graph` its cells (if built), `bounds` and `objects`
