@@ -292,7 +292,7 @@ fn the_build_guard_finds_and_repairs_a_planted_false_negative() {
     let table = m.instances.iter().position(|i| i.name == "table").unwrap() as u32;
     let room = p
         .graph
-        .locate(Vec3::from(objects[table as usize].center()) + Vec3::Y)
+        .locate(objects[table as usize].center() + Vec3::Y)
         .unwrap();
     for e in &mut p.stabs[room as usize].entries {
         e.objects.retain(|&o| o != table);

@@ -23,20 +23,20 @@ const MAX_PIECES: usize = 4096;
 /// Whether `b` lies wholly inside the union of `solids` (up to [`TOLERANCE`]). Errs towards
 /// `false` when the solids are too many to decide within the work bound.
 pub fn covered(b: &Aabb, solids: &[Aabb]) -> bool {
-    let mut near = clip_all(b, solids);
+    let near = clip_all(b, solids);
     if near.is_empty() {
         return false;
     }
     let mut budget = MAX_PIECES;
-    covered_rec(b, &mut near, &mut budget)
+    covered_rec(b, &near, &mut budget)
 }
 
 /// The volume (cubic metres) of the part of `b` inside the union of `solids`; a lower bound when
 /// the solids are too many to measure within the work bound.
 pub fn solid_volume(b: &Aabb, solids: &[Aabb]) -> f64 {
-    let mut near = clip_all(b, solids);
+    let near = clip_all(b, solids);
     let mut budget = MAX_PIECES;
-    volume_rec(b, &mut near, &mut budget)
+    volume_rec(b, &near, &mut budget)
 }
 
 /// The plane `(axis, at)` to cut a partly solid `b` along: the face plane of the solids inside
@@ -121,7 +121,7 @@ fn halves(b: &Aabb, axis: usize, at: f32) -> (Aabb, Aabb) {
     (lo, hi)
 }
 
-fn covered_rec(b: &Aabb, solids: &mut Vec<Aabb>, budget: &mut usize) -> bool {
+fn covered_rec(b: &Aabb, solids: &[Aabb], budget: &mut usize) -> bool {
     if solids.iter().any(|s| contains(s, b)) {
         return true;
     }
@@ -135,12 +135,12 @@ fn covered_rec(b: &Aabb, solids: &mut Vec<Aabb>, budget: &mut usize) -> bool {
     };
     let (lo, hi) = halves(b, axis, at);
     [lo, hi].iter().all(|h| {
-        let mut part = clip_all(h, solids);
-        !part.is_empty() && covered_rec(h, &mut part, budget)
+        let part = clip_all(h, solids);
+        !part.is_empty() && covered_rec(h, &part, budget)
     })
 }
 
-fn volume_rec(b: &Aabb, solids: &mut Vec<Aabb>, budget: &mut usize) -> f64 {
+fn volume_rec(b: &Aabb, solids: &[Aabb], budget: &mut usize) -> f64 {
     match solids.len() {
         0 => return 0.0,
         1 => return volume(&solids[0]),
@@ -159,7 +159,7 @@ fn volume_rec(b: &Aabb, solids: &mut Vec<Aabb>, budget: &mut usize) -> f64 {
     let (lo, hi) = halves(b, axis, at);
     [lo, hi]
         .iter()
-        .map(|h| volume_rec(h, &mut clip_all(h, solids), budget))
+        .map(|h| volume_rec(h, &clip_all(h, solids), budget))
         .sum()
 }
 
