@@ -1,0 +1,74 @@
+//! What a person does in a building's cells: which cells are rooms (room-sized, or a closed
+//! room alone), and which portals are doors and stair holes a person walks through. All in
+//! metres.
+
+use crate::cells::CellGraph;
+use crate::geometry::Aabb;
+
+/// Whether the cells have rooms to tour: two or more room-sized live cells joined through
+/// portals, or one closed room alone (a hall without openings), found by occluders (not a grid
+/// of open cells, not one box around an object).
+pub fn has_rooms(graph: &CellGraph) -> bool {
+    if graph.grid_fallback {
+        return false;
+    }
+    let rooms = (0..graph.cells.len() as u32)
+        .filter(|&c| graph.cells[c as usize].live && roomy(graph, c))
+        .count();
+    (rooms >= 2 && !graph.portals.is_empty()) || closed_room(graph).is_some()
+}
+
+/// The one live cell of a model that is a closed room: room-sized, without portals, and walled
+/// in on every side (it does not reach the model's box anywhere, as the whole box of an
+/// object's grid cell would).
+fn closed_room(graph: &CellGraph) -> Option<u32> {
+    let mut live = (0..graph.cells.len() as u32).filter(|&c| graph.cells[c as usize].live);
+    let (c, None) = (live.next()?, live.next()) else {
+        return None;
+    };
+    let b = &graph.cells[c as usize].bounds;
+    let inside = (0..3)
+        .all(|k| b.min[k] > graph.bounds.min[k] + 0.01 && b.max[k] < graph.bounds.max[k] - 0.01);
+    (roomy(graph, c) && graph.cells[c as usize].portals.is_empty() && inside).then_some(c)
+}
+
+/// A live cell an observer can stand in and look around: not the thin opening of a door or a
+/// window, which is live too but leads nowhere worth seeing.
+pub(super) fn roomy(graph: &CellGraph, c: u32) -> bool {
+    let s = graph.cells[c as usize].bounds.size();
+    s.x >= 1.0 && s.z >= 1.0 && s.y >= 2.0
+}
+
+/// Lowest eye height through an opening (metres above its sill).
+pub const EYE_HEIGHT: f32 = 1.6;
+/// A door: an opening at least this tall (metres)...
+const DOOR_HEIGHT: f32 = 1.8;
+/// ...whose sill is at most this far (metres) above the lower floor of the cells it joins...
+const DOOR_SILL: f32 = 0.35;
+/// ...and at least this wide (metres); holes in floors too, both ways. Narrower gaps (between
+/// wall segments of an export) are not walked through.
+const DOOR_WIDTH: f32 = 0.5;
+
+/// Whether a person walks through this portal: both its cells inside the building (not
+/// touching the sides of the model's box, where the outside is), and it is a door (an
+/// opening at floor level, tall enough) or a hole in a floor (a stair's).
+pub fn walkable(graph: &CellGraph, portal: u32) -> bool {
+    let p = &graph.portals[portal as usize];
+    let [a, b] = p.cells.map(|c| &graph.cells[c as usize].bounds);
+    let inside = |c: &Aabb| {
+        [0, 2].iter().all(|&k| {
+            c.min[k] > graph.bounds.min[k] + 1e-3 && c.max[k] < graph.bounds.max[k] - 1e-3
+        })
+    };
+    if !inside(a) || !inside(b) {
+        return false;
+    }
+    let size = p.rect.size();
+    if p.axis == 1 {
+        return size.x >= DOOR_WIDTH && size.z >= DOOR_WIDTH;
+    }
+    let width = if p.axis == 0 { size.z } else { size.x };
+    width >= DOOR_WIDTH
+        && size.y >= DOOR_HEIGHT
+        && p.rect.min[1] <= a.min[1].min(b.min[1]) + DOOR_SILL
+}
