@@ -7,22 +7,10 @@ use portico_data::cells::occluders::occluder_boxes;
 use portico_data::cells::sight::Triangles;
 use portico_data::cells::verify::verify_against_triangles;
 use portico_data::cells::{Precomputed, precompute};
-use portico_data::geometry::Aabb;
 use portico_data::import::import_bytes;
-use portico_data::model::Model;
 use portico_generator::{Params, Preset, generate, without_tags};
 
-/// Every instance's world box.
-fn object_boxes(m: &Model) -> Vec<Aabb> {
-    m.instances
-        .iter()
-        .map(|i| {
-            m.defs[i.def as usize].lods[0]
-                .bounds()
-                .transformed(&i.transform)
-        })
-        .collect()
-}
+mod common;
 
 fn cells_of(glb: &[u8]) -> (Precomputed, usize) {
     let m = import_bytes(glb, "glb").expect("the generated building imports");
@@ -31,7 +19,7 @@ fn cells_of(glb: &[u8]) -> (Precomputed, usize) {
             .iter()
             .map(|i| (&m.defs[i.def as usize].lods[0], i.transform, i.occluder)),
     );
-    let objects = object_boxes(&m);
+    let objects = common::object_boxes(&m);
     let p = precompute(&m.bounds(), &occ, &objects, &|_, _| {}, &|| {});
     let tagged = m.instances.iter().filter(|i| i.occluder).count();
     (p, tagged)
@@ -86,7 +74,7 @@ fn an_untagged_export_gets_the_tagged_buildings_cells_and_culling() {
                 .collect()
         })
         .collect();
-    let scene = Triangles::new(object_boxes(&m), triangles);
+    let scene = Triangles::new(common::object_boxes(&m), triangles);
     let report = verify_against_triangles(&untagged.graph, &untagged.stabs, &scene, 20_000, 1);
     assert_eq!(report.false_negatives, 0, "{report:?}");
 }

@@ -19,6 +19,8 @@ use proptest::prelude::*;
 use spade::{ConstrainedDelaunayTriangulation, Point2, Triangulation};
 use std::path::{Path, PathBuf};
 
+mod common;
+
 fn case(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
         .join("tests/cases")
@@ -181,15 +183,7 @@ fn a_house_on_hilly_terrain_keeps_its_own_cells_and_is_toured_inside() {
     let dir = tempfile::tempdir().unwrap();
     let m = import_file(&house_on_terrain(dir.path())).unwrap();
     let ground = m.instances.iter().position(|i| i.name == "ground").unwrap();
-    let boxes: Vec<Aabb> = m
-        .instances
-        .iter()
-        .map(|i| {
-            m.defs[i.def as usize].lods[0]
-                .bounds()
-                .transformed(&i.transform)
-        })
-        .collect();
+    let boxes = common::object_boxes(&m);
     assert!(boxes[ground].size().y > 10.0, "{:?}", boxes[ground]);
     let around = portico_data::cells::surroundings(&boxes);
     assert_eq!(
@@ -258,15 +252,7 @@ fn scene_of(m: &Model) -> Triangles {
                 .collect()
         })
         .collect();
-    let bounds = m
-        .instances
-        .iter()
-        .map(|i| {
-            m.defs[i.def as usize].lods[0]
-                .bounds()
-                .transformed(&i.transform)
-        })
-        .collect();
+    let bounds = common::object_boxes(m);
     Triangles::instanced(
         bounds,
         shapes,

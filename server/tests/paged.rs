@@ -19,18 +19,21 @@ async fn get(http: &reqwest::Client, url: &str) -> reqwest::Response {
         .unwrap()
 }
 
+/// The whole manifest, bincode-coded.
+async fn whole_manifest(http: &reqwest::Client, base: &str) -> Manifest<Header> {
+    let bytes = get(http, &format!("{base}/v1/manifest"))
+        .await
+        .bytes()
+        .await
+        .unwrap();
+    portico_protocol::manifest_from_bincode(&bytes).unwrap()
+}
+
 #[tokio::test]
 async fn the_core_and_the_pages_make_up_the_whole_manifest() {
     let s = start(Config::default()).await;
     let http = reqwest::Client::new();
-    let whole: Manifest<Header> = portico_protocol::manifest_from_bincode(
-        &get(&http, &format!("{}/v1/manifest", s.base))
-            .await
-            .bytes()
-            .await
-            .unwrap(),
-    )
-    .unwrap();
+    let whole = whole_manifest(&http, &s.base).await;
     let r = get(&http, &format!("{}/v1/manifest/core", s.base)).await;
     assert_eq!(r.status(), 200);
     assert_eq!(r.headers()["cache-control"], "no-cache");
@@ -189,14 +192,7 @@ async fn a_database_without_cells_has_no_core_and_its_whole_manifest_lists_every
     assert_eq!(r.status(), 404);
     let e: ApiError = r.json().await.unwrap();
     assert!(e.message.contains("no cells"), "{}", e.message);
-    let whole: Manifest<Header> = portico_protocol::manifest_from_bincode(
-        &get(&http, &format!("{}/v1/manifest", s.base))
-            .await
-            .bytes()
-            .await
-            .unwrap(),
-    )
-    .unwrap();
+    let whole = whole_manifest(&http, &s.base).await;
     assert_eq!(whole.header.instances.len(), instances);
     assert!(whole.header.cells.is_none());
 }

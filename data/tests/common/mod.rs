@@ -2,7 +2,21 @@
 
 use std::path::{Path, PathBuf};
 
+/// Every instance's world box (its finest mesh's, placed).
+#[allow(dead_code)] // not every test crate needs it
+pub fn object_boxes(m: &portico_data::model::Model) -> Vec<portico_data::geometry::Aabb> {
+    m.instances
+        .iter()
+        .map(|i| {
+            m.defs[i.def as usize].lods[0]
+                .bounds()
+                .transformed(&i.transform)
+        })
+        .collect()
+}
+
 /// Generates the tiny building (`seed`, `floors` storeys) and writes it as `dir/tiny.glb`.
+#[allow(dead_code)] // not every test crate builds one
 pub fn tiny_glb(dir: &Path, seed: u64, floors: u32) -> PathBuf {
     let params = portico_generator::Params {
         preset: portico_generator::Preset::Tiny,
