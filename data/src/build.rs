@@ -111,12 +111,12 @@ pub fn build_with(
     } = model;
     // Occluders come from the source meshes, before LOD optimisation reorders their triangles.
     let occluders = (!opts.no_cells).then(|| {
+        // What is see-through (glass, a cut-out fence) never occludes unless its source says
+        // so: a ray passes it, so its shape must not close the cells behind it.
         let mut occ = occluder_boxes(instances.iter().filter_map(|i| {
-            Some((
-                defs.get(i.def as usize)?.lods.first()?,
-                i.transform,
-                i.occluder,
-            ))
+            let mesh = defs.get(i.def as usize)?.lods.first()?;
+            let clear = see_through(mesh, materials.get(i.material as usize));
+            (i.occluder || !clear).then_some((mesh, i.transform, i.occluder))
         }));
         occ.rooms = spaces
             .iter()
@@ -205,6 +205,14 @@ pub fn build_with(
         hierarchy_seconds,
         guard: guarded,
     })
+}
+
+/// Whether an object can be seen through: a blended or cut-out material, a translucent base
+/// colour, or any translucent vertex (IFC glass).
+fn see_through(mesh: &crate::geometry::Mesh, material: Option<&crate::model::Material>) -> bool {
+    let by_material = material
+        .is_some_and(|m| m.alpha != crate::texture::AlphaMode::Opaque || m.base_color[3] < 0.999);
+    by_material || mesh.vertices.iter().any(|v| v.color[3] < 255)
 }
 
 /// Every instance's finest LOD, as shared shapes placed by the instances' transforms, for the

@@ -23,6 +23,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 use serde::Serialize;
+use std::collections::HashSet;
 
 /// Rays the guard casts over the whole model, at most (unless every live cell at
 /// [`MIN_RAYS_PER_CELL`] needs more).
@@ -128,7 +129,8 @@ fn touching_cells(graph: &CellGraph, scene: &Triangles) -> Vec<Vec<u32>> {
 
 /// The object whose triangles the ray hits first inside the subdivision, found by walking the
 /// cells the ray crosses in order: a hit inside the cell being crossed is the first, since
-/// every object a later cell holds is hit, if at all, beyond that cell.
+/// every object a later cell holds is hit, if at all, beyond that cell. Each object is tested
+/// once per ray, however many cells it touches.
 fn first_hit(
     graph: &CellGraph,
     touching: &[Vec<u32>],
@@ -138,12 +140,24 @@ fn first_hit(
 ) -> Option<u32> {
     let (_, end) = slab(origin, dir, &graph.bounds)?;
     let mut best: Option<(f32, u32)> = None;
+    let mut tested: HashSet<u32> = HashSet::new();
     let mut t = 0.0f32;
+    let mut last = u32::MAX;
+    let mut step = 1e-4f32;
     // A ray crosses each cell once; the bound only guards against a walk that stalls.
-    for _ in 0..graph.cells.len() + 1 {
-        let c = graph.locate(origin + dir * t)?;
-        let (_, exit) = slab(origin, dir, &graph.cells[c as usize].bounds)?;
-        if let Some(hit) = scene.nearest(&touching[c as usize], origin, dir, end)
+    for _ in 0..2 * graph.cells.len() + 8 {
+        let Some(c) = graph.locate(origin + dir * t) else {
+            break;
+        };
+        let Some((_, exit)) = slab(origin, dir, &graph.cells[c as usize].bounds) else {
+            break;
+        };
+        let fresh: Vec<u32> = touching[c as usize]
+            .iter()
+            .copied()
+            .filter(|&o| tested.insert(o))
+            .collect();
+        if let Some(hit) = scene.nearest(&fresh, origin, dir, end)
             && best.is_none_or(|b| hit.0 < b.0)
         {
             best = Some(hit);
@@ -151,7 +165,10 @@ fn first_hit(
         if best.is_some_and(|b| b.0 <= exit) || exit >= end {
             break;
         }
-        t = exit.max(t) + 1e-4;
+        // Past the exit face; further each time rounding lands the point back in one cell.
+        step = if c == last { step * 10.0 } else { 1e-4 };
+        last = c;
+        t = exit.max(t) + step;
     }
     best.map(|(_, o)| o)
 }

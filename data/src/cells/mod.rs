@@ -383,7 +383,13 @@ pub fn precompute(
         &occluders.solids,
         &occluders.rooms,
     );
-    portals::find_portals_around(&mut graph, &core, &occluders.faces, &occluders.solids);
+    portals::find_portals_around(
+        &mut graph,
+        &core,
+        &occluders.faces,
+        &occluders.solids,
+        objects,
+    );
     let incidence = stab::incidence(&graph, objects);
     let subdivision_seconds = t0.elapsed().as_secs_f64();
     let t1 = std::time::Instant::now();

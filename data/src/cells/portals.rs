@@ -18,19 +18,21 @@ const MIN_AREA: f32 = 1e-6;
 /// and get no portals; so do cells left without any.
 pub fn find_portals(graph: &mut CellGraph, occluders: &[Aabb], solids: &[Aabb]) {
     let core = graph.bounds;
-    find_portals_around(graph, &core, occluders, solids);
+    find_portals_around(graph, &core, occluders, solids, &[]);
 }
 
-/// [`find_portals`] for a subdivision whose `core` (the model's bulk) was cut out first
-/// ([`super::subdivide::subdivide_around`]). The cells outside the core are empty space around a
-/// stray object: liveness inside the core is decided by the core's own portals, as if nothing
-/// lay outside it (so walls and slabs at its edge stay dead), and an outside cell is live only
-/// when a live core cell opens onto it, directly or through other outside cells.
+/// [`find_portals`] for a subdivision whose `core` (the building: the model less its strays
+/// and surroundings) was cut out first ([`super::subdivide::subdivide_around`]). The cells
+/// outside the core are the space around it (the site, a stray's surroundings): an outside
+/// cell is live when a live core cell opens onto it, directly or through other outside cells,
+/// or when one of the `objects` (boxes) touches it, so that the ground or a stray is in some
+/// live cell's list and an observer out there sees it.
 pub fn find_portals_around(
     graph: &mut CellGraph,
     core: &Aabb,
     occluders: &[Aabb],
     solids: &[Aabb],
+    objects: &[Aabb],
 ) {
     let lookup = Buckets::new(occluders);
     let solid_lookup = Buckets::new(solids);
@@ -87,15 +89,12 @@ pub fn find_portals_around(
             }
         }
     }
-    // With a single cell there is nothing to connect; otherwise a core cell without portals to
-    // other core cells is sealed: the inside of a wall or slab when it is thinner than a person
+    // With a single cell there is nothing to connect; otherwise a core cell without any portal
+    // is sealed: the inside of a wall or slab when it is thinner than a person
     // ([`SEALED_ROOM_MIN`]), else a closed room (a hall without openings), which stays live.
     let cells = graph.cells.len();
     let mut degree = vec![0usize; cells];
-    for p in portals
-        .iter()
-        .filter(|p| p.cells.iter().all(|&c| !outside[c as usize]))
-    {
+    for p in &portals {
         p.cells.iter().for_each(|&c| degree[c as usize] += 1);
     }
     let core_cells = outside.iter().filter(|o| !**o).count();
@@ -105,11 +104,16 @@ pub fn find_portals_around(
             graph.cells[c].live = false;
         }
     }
-    // Outside cells: live when reached from a live core cell.
+    // Outside cells: live when reached from a live core cell, or when something lies there.
     if outside.iter().any(|&o| o) {
         let mut reached: Vec<bool> = (0..cells)
             .map(|c| !outside[c] && graph.cells[c].live)
             .collect();
+        for o in objects {
+            for c in graph.cells_touching(o) {
+                reached[c as usize] |= outside[c as usize];
+            }
+        }
         let mut changed = true;
         while changed {
             changed = false;

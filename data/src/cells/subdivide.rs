@@ -162,7 +162,9 @@ fn best_split(b: &Aabb, ids: &[u32], occluders: &[Aabb]) -> Option<(usize, f32)>
 /// A leaf's cut along the faces of the solids in it, when they fill at least half of it but not
 /// all: its open part (a skylight, a window) is then split off from the solid part.
 fn solid_split(b: &Aabb, sids: &[u32], solids: &[Aabb]) -> Option<(usize, f32)> {
-    if sids.is_empty() {
+    // A perforated screen would give a cell per hole: past this many solid pieces the leaf
+    // stays whole (live, as it is not wholly solid: conservative, only less culling).
+    if sids.is_empty() || sids.len() > MAX_SOLIDS_SPLIT {
         return None;
     }
     let near: Vec<Aabb> = sids.iter().map(|&i| solids[i as usize]).collect();
@@ -172,6 +174,9 @@ fn solid_split(b: &Aabb, sids: &[u32], solids: &[Aabb]) -> Option<(usize, f32)> 
     }
     super::solid::split_plane(b, &near, MIN_THICKNESS)
 }
+
+/// Most solid pieces in a leaf that [`solid_split`] cuts along.
+pub const MAX_SOLIDS_SPLIT: usize = 64;
 
 /// Solids overlapping the box's interior.
 fn filling(b: &Aabb, ids: &[u32], solids: &[Aabb]) -> Vec<u32> {
