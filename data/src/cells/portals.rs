@@ -14,8 +14,8 @@ use crate::geometry::Aabb;
 /// Ignore open slivers smaller than this (square metres).
 const MIN_AREA: f32 = 1e-6;
 
-/// Fills `graph.portals` and every live cell's portal list. Cells inside the `solids` are dead
-/// and get no portals; so do cells left without any.
+/// Fills `graph.portals` and every live cell's portal list. Cells wholly inside the `solids`
+/// are dead and get no portals; so do cells left without any that are thinner than a person.
 pub fn find_portals(graph: &mut CellGraph, occluders: &[Aabb], solids: &[Aabb]) {
     let core = graph.bounds;
     find_portals_around(graph, &core, occluders, solids, &[]);
