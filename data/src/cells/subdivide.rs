@@ -175,7 +175,7 @@ fn solid_split(b: &Aabb, sids: &[u32], solids: &[Aabb]) -> Option<(usize, f32)> 
     super::solid::split_plane(b, &near, MIN_THICKNESS)
 }
 
-/// Most solid pieces in a leaf that [`solid_split`] cuts along.
+/// Most solid pieces in a leaf that is cut along its solids' faces (more: it stays whole).
 pub const MAX_SOLIDS_SPLIT: usize = 64;
 
 /// Solids overlapping the box's interior.
