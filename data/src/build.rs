@@ -113,9 +113,15 @@ pub fn build_with(
     let occluders = (!opts.no_cells).then(|| {
         // What is see-through (glass, a cut-out fence) never occludes unless its source says
         // so: a ray passes it, so its shape must not close the cells behind it.
+        // Translucent vertices are looked for once per definition, not once per instance.
+        let clear_vertices: Vec<bool> = defs
+            .iter()
+            .map(|d| d.lods.first().is_some_and(translucent))
+            .collect();
         let mut occ = occluder_boxes(instances.iter().filter_map(|i| {
             let mesh = defs.get(i.def as usize)?.lods.first()?;
-            let clear = see_through(mesh, materials.get(i.material as usize));
+            let clear = clear_vertices[i.def as usize]
+                || materials.get(i.material as usize).is_some_and(see_through);
             (i.occluder || !clear).then_some((mesh, i.transform, i.occluder))
         }));
         occ.rooms = spaces
@@ -207,12 +213,14 @@ pub fn build_with(
     })
 }
 
-/// Whether an object can be seen through: a blended or cut-out material, a translucent base
-/// colour, or any translucent vertex (IFC glass).
-fn see_through(mesh: &crate::geometry::Mesh, material: Option<&crate::model::Material>) -> bool {
-    let by_material = material
-        .is_some_and(|m| m.alpha != crate::texture::AlphaMode::Opaque || m.base_color[3] < 0.999);
-    by_material || mesh.vertices.iter().any(|v| v.color[3] < 255)
+/// Whether a material can be seen through: blended or cut out, or a translucent base colour.
+fn see_through(m: &crate::model::Material) -> bool {
+    m.alpha != crate::texture::AlphaMode::Opaque || m.base_color[3] < 0.999
+}
+
+/// Whether any vertex of a mesh is translucent (IFC glass carries its alpha there).
+fn translucent(mesh: &crate::geometry::Mesh) -> bool {
+    mesh.vertices.iter().any(|v| v.color[3] < 255)
 }
 
 /// Every instance's finest LOD, as shared shapes placed by the instances' transforms, for the

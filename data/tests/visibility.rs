@@ -197,7 +197,9 @@ fn a_house_on_a_ground_plane_keeps_its_own_cells_and_is_toured_inside() {
 }
 
 /// The house of `import/house.obj` on a 400 × 400 m hilly terrain, 5 m between its vertices,
-/// flat around the house and up to about 12 m high at the edges.
+/// flat around the house and up to about 12 m high at the edges: the shared case
+/// `house-on-terrain-400m.obj` (1.1 MB, so made here rather than stored) has the same grid,
+/// extent and heights.
 fn house_on_terrain(dir: &Path) -> PathBuf {
     let mut obj = std::fs::read_to_string(case("import/house.obj")).unwrap();
     let base = obj.lines().filter(|l| l.starts_with("v ")).count();
