@@ -142,11 +142,15 @@ pub async fn drive<F: Fetcher>(
     state: watch::Receiver<Option<Ask>>,
     tx: mpsc::Sender<Event<F::Body>>,
 ) {
-    drive_after(0, fetcher, policy, parallel, window, state, tx).await
+    let never = std::future::pending();
+    drive_after(0, fetcher, policy, parallel, window, state, tx, never).await;
 }
 
 /// [`drive`], after `events` already sent on `tx` by another transport (they count in what
-/// the frame loop reports it has taken).
+/// the frame loop reports it has taken), until `stop` completes (another transport takes
+/// over): then the events sent in all, `None` when the frame loop went away or the database
+/// is stale.
+#[allow(clippy::too_many_arguments)]
 pub(crate) async fn drive_after<F: Fetcher>(
     events: u64,
     fetcher: F,
@@ -155,7 +159,10 @@ pub(crate) async fn drive_after<F: Fetcher>(
     window: u64,
     mut state: watch::Receiver<Option<Ask>>,
     tx: mpsc::Sender<Event<F::Body>>,
-) {
+    stop: impl Future<Output = ()>,
+) -> Option<u64> {
+    let mut stop = std::pin::pin!(stop);
+    let mut stopped = false;
     let mut s = Schedule::with_window(window);
     // What arrives within two frames past the round trip stays in flight, no more: a new
     // list's urgent segments never queue behind more read-ahead than that ([`LinkMeter`]).
@@ -197,6 +204,10 @@ pub(crate) async fn drive_after<F: Fetcher>(
             batches.insert(task.id(), (asked, now));
         }
         let event = tokio::select! {
+            () = &mut stop => {
+                stopped = true;
+                break;
+            }
             changed = state.changed() => {
                 if changed.is_err() {
                     break;
@@ -269,6 +280,7 @@ pub(crate) async fn drive_after<F: Fetcher>(
     if let Some(a) = asking {
         a.abort();
     }
+    stopped.then_some(seq)
 }
 
 /// The link as `meter` measured it, with the wire bytes `s` has in flight.

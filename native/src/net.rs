@@ -48,10 +48,12 @@ impl Remote {
         &self.base
     }
 
-    /// The push transport's address: `ws://…/v1/stream` (`wss://` for `https://`), with the
-    /// token as `?token=` when there is one. Errors: a base that is not an `http(s)://` URL.
+    /// The push transport's address: `ws://…/v1/db/{database_id}/stream` once a manifest named
+    /// the database (the server closes a session on another database with
+    /// [`portico_protocol::CLOSE_STALE`]), `…/v1/stream` before; `wss://` for `https://`, with
+    /// the token as `?token=` when there is one. Errors: a base that is not an `http(s)://` URL.
     pub fn stream_url(&self) -> Result<String> {
-        let mut url = reqwest::Url::parse(&format!("{}/v1/stream", self.base))
+        let mut url = reqwest::Url::parse(&format!("{}{}/stream", self.base, self.segments_base()))
             .with_context(|| format!("{}: not a URL", self.base))?;
         let scheme = match url.scheme() {
             "https" => "wss",

@@ -21,6 +21,7 @@
 
 use crate::drive::{Ask, Event, Fetcher, drive_after};
 use futures_util::{SinkExt, StreamExt};
+use portico_protocol::CLOSE_STALE;
 use portico_protocol::{
     MAX_LACKING, PROTOCOL_VERSION, Policy, ServerFrame, StreamClient, StreamServer,
     parse_server_frame,
@@ -32,6 +33,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, watch};
 use tokio_tungstenite::tungstenite::Message;
+use tokio_tungstenite::tungstenite::http;
 
 /// How the IO stage gets its segments.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -67,9 +69,24 @@ impl FromStr for Transport {
 /// How long a session may take to open before the stage reads over pull instead.
 pub const OPEN_TIMEOUT: Duration = Duration::from_secs(10);
 
+/// After a session ends or does not open, pull reads for this long before a session is tried
+/// again; each failed try doubles it up to [`REOPEN_MAX`].
+pub const REOPEN_FIRST: Duration = Duration::from_secs(1);
+
+/// The longest wait between tries to open a session.
+pub const REOPEN_MAX: Duration = Duration::from_secs(30);
+
+/// A session that lasted this long was healthy: after it ends, the wait starts again from
+/// [`REOPEN_FIRST`].
+const HEALTHY: Duration = Duration::from_secs(10);
+
 /// Runs the IO stage until the frame loop goes away: over push when `transport` says so (at
 /// `rate_bytes_per_s`, which the server may cap), over pull ([`crate::drive::drive`], with
-/// `parallel` and `window`) otherwise and once push has failed.
+/// `parallel` and `window`) otherwise. When a session ends or does not open, pull reads while
+/// sessions are tried again in the background, with back-off ([`REOPEN_FIRST`] doubling to
+/// [`REOPEN_MAX`]); the first that opens takes over, told what the cache holds. A session
+/// refused because the server now serves another database ([`portico_protocol::CLOSE_STALE`]
+/// or `410 Gone`) is [`Event::Stale`], as pull's 410 is: the IO stage stops.
 #[allow(clippy::too_many_arguments)]
 pub async fn run<F: Fetcher>(
     fetcher: F,
@@ -81,28 +98,151 @@ pub async fn run<F: Fetcher>(
     mut state: watch::Receiver<Option<Ask>>,
     tx: mpsc::Sender<Event<F::Body>>,
 ) {
+    if transport == Transport::Pull {
+        let never = std::future::pending();
+        drive_after(0, fetcher, policy, parallel, window, state, tx, never).await;
+        return;
+    }
     let mut events = 0;
-    if transport == Transport::Push {
-        let (ended, sent) = push(&fetcher, policy, rate_bytes_per_s, &mut state, &tx).await;
-        events = sent;
-        match ended {
-            Ended::Gone => return,
-            Ended::Failed(why) => {
-                let msg = format!("{why}; reading over HTTP pull instead");
-                if tx.send(Event::Failed(msg)).await.is_err() {
-                    return;
-                }
-                events += 1;
+    let mut wait = REOPEN_FIRST;
+    let mut ws = match open(&fetcher).await {
+        Ok(ws) => Some(ws),
+        Err(Ended::Failed(why)) => {
+            let msg = format!("{why}; reading over HTTP pull instead");
+            if tx.send(Event::Failed(msg)).await.is_err() {
+                return;
+            }
+            events += 1;
+            None
+        }
+        Err(end) => return stop(end, &tx).await,
+    };
+    loop {
+        if let Some(ws) = ws.take() {
+            let began = Instant::now();
+            let (ended, sent) = push(
+                ws,
+                &fetcher,
+                policy,
+                rate_bytes_per_s,
+                events,
+                &mut state,
+                &tx,
+            )
+            .await;
+            events = sent;
+            let Ended::Failed(why) = ended else {
+                return stop(ended, &tx).await;
+            };
+            if began.elapsed() >= HEALTHY {
+                wait = REOPEN_FIRST;
+            }
+            let msg = format!("{why}; reading over HTTP pull, opening the stream again");
+            if tx.send(Event::Failed(msg)).await.is_err() {
+                return;
+            }
+            events += 1;
+        }
+        // Pull until a session opens (tried in the background, so reads go on meanwhile).
+        let (opened_tx, opened_rx) = tokio::sync::oneshot::channel();
+        let opener = tokio::spawn(reopen(fetcher.clone(), wait, opened_tx));
+        let mut opened = None;
+        let until = async {
+            opened = opened_rx.await.ok();
+        };
+        let pulled = drive_after(
+            events,
+            fetcher.clone(),
+            policy,
+            parallel,
+            window,
+            state.clone(),
+            tx.clone(),
+            until,
+        )
+        .await;
+        opener.abort();
+        let Some(n) = pulled else { return };
+        events = n;
+        match opened {
+            Some(Ok((socket, waited))) => {
+                ws = Some(socket);
+                wait = waited;
+            }
+            Some(Err(end)) => return stop(end, &tx).await,
+            None => return,
+        }
+    }
+}
+
+/// Ends the IO stage: a stale database is said so ([`Event::Stale`]).
+async fn stop<B>(end: Ended, tx: &mpsc::Sender<Event<B>>) {
+    if let Ended::Stale(why) = end {
+        let _ = tx.send(Event::Stale(why)).await;
+    }
+}
+
+/// An open WebSocket to the server.
+type Socket =
+    tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// Tries to open a session after `wait`, doubling the wait after each failure; sends the
+/// first that opens (with the wait to use after it ends), or a stale database.
+async fn reopen<F: Fetcher>(
+    f: F,
+    mut wait: Duration,
+    opened: tokio::sync::oneshot::Sender<Result<(Socket, Duration), Ended>>,
+) {
+    loop {
+        tokio::time::sleep(wait).await;
+        wait = (wait * 2).min(REOPEN_MAX);
+        match open(&f).await {
+            Ok(ws) => {
+                let _ = opened.send(Ok((ws, wait)));
+                return;
+            }
+            Err(Ended::Failed(why)) => tracing::debug!("stream: {why}"),
+            Err(end) => {
+                let _ = opened.send(Err(end));
+                return;
             }
         }
     }
-    drive_after(events, fetcher, policy, parallel, window, state, tx).await;
+}
+
+/// Opens a session (the handshake within [`OPEN_TIMEOUT`]).
+async fn open<F: Fetcher>(f: &F) -> Result<Socket, Ended> {
+    let url = f
+        .stream_url()
+        .map_err(|e| Ended::Failed(format!("{e:#}")))?;
+    // Messages name the address, never the token.
+    let shown = url.split('?').next().unwrap_or_default().to_string();
+    // Nagle's algorithm would hold each small message (an observer, a Lacking) until the
+    // server acknowledged the one before: tens of milliseconds of delayed ACK per frame.
+    let handshake = tokio_tungstenite::connect_async_with_config(&url, None, true);
+    match tokio::time::timeout(OPEN_TIMEOUT, handshake).await {
+        Ok(Ok((ws, _))) => Ok(ws),
+        Ok(Err(tokio_tungstenite::tungstenite::Error::Http(r)))
+            if r.status() == http::StatusCode::GONE =>
+        {
+            Err(Ended::Stale(format!(
+                "{shown}: 410 Gone: the server serves another database"
+            )))
+        }
+        Ok(Err(e)) => Err(Ended::Failed(format!("{shown}: no session: {e}"))),
+        Err(_) => Err(Ended::Failed(format!(
+            "{shown}: no session within {} s",
+            OPEN_TIMEOUT.as_secs()
+        ))),
+    }
 }
 
 /// Why a session ended.
 enum Ended {
     /// The frame loop went away.
     Gone,
+    /// The server serves another database now: why.
+    Stale(String),
     /// The session did not open, or ended: why.
     Failed(String),
 }
@@ -128,31 +268,21 @@ struct Handed {
     segments: Vec<(u64, u32)>,
 }
 
-/// One push session; returns why it ended and how many events it handed on.
+/// One push session on `ws`, after `events` handed on before it; returns why it ended and how
+/// many events were handed on in all.
 async fn push<F: Fetcher>(
+    ws: Socket,
     f: &F,
     policy: Policy,
     rate: u64,
+    events: u64,
     state: &mut watch::Receiver<Option<Ask>>,
     tx: &mpsc::Sender<Event<F::Body>>,
 ) -> (Ended, u64) {
-    let url = match f.stream_url() {
-        Ok(u) => u,
-        Err(e) => return (Ended::Failed(format!("{e:#}")), 0),
-    };
-    // Messages name the address, never the token.
-    let shown = url.split('?').next().unwrap_or_default().to_string();
-    // Nagle's algorithm would hold each small message (an observer, a Lacking) until the
-    // server acknowledged the one before: tens of milliseconds of delayed ACK per frame.
-    let open = tokio_tungstenite::connect_async_with_config(&url, None, true);
-    let ws = match tokio::time::timeout(OPEN_TIMEOUT, open).await {
-        Ok(Ok((ws, _))) => ws,
-        Ok(Err(e)) => return (Ended::Failed(format!("{shown}: no session: {e}")), 0),
-        Err(_) => {
-            let why = format!("{shown}: no session within {} s", OPEN_TIMEOUT.as_secs());
-            return (Ended::Failed(why), 0);
-        }
-    };
+    let shown = f
+        .stream_url()
+        .map(|u| u.split('?').next().unwrap_or_default().to_string())
+        .unwrap_or_default();
     let (mut sink, mut socket) = ws.split();
 
     // Out: each message leaves when the link has taken it there (order kept).
@@ -167,7 +297,10 @@ async fn push<F: Fetcher>(
         let _ = sink.close().await;
     });
     // In: each frame is the client's when the link has brought it; decoded, then handed on.
-    let handed = Arc::new(Mutex::new(Handed::default()));
+    let handed = Arc::new(Mutex::new(Handed {
+        events,
+        segments: Vec::new(),
+    }));
     let (inbox, mut in_rx) = mpsc::unbounded_channel::<(Instant, Incoming)>();
     let (fd, txd, h, outd) = (f.clone(), tx.clone(), handed.clone(), out.clone());
     let mut delivery = tokio::spawn(async move {
@@ -197,7 +330,14 @@ async fn push<F: Fetcher>(
                         let _ = outd.send((fd.reaches_server(), Message::Binary(back.into())));
                         continue;
                     }
-                    Err(e) => (Event::Failed(format!("segment {id}: {e:#}")), None),
+                    // Rejected (a checksum, a damaged frame): the server's mirror must not
+                    // count it held, or it would never come again.
+                    Err(e) => {
+                        let back = portico_protocol::to_bincode(&StreamClient::Evicted(vec![id]))
+                            .unwrap_or_default();
+                        let _ = outd.send((fd.reaches_server(), Message::Binary(back.into())));
+                        (Event::Failed(format!("segment {id}: {e:#}")), None)
+                    }
                 },
                 Incoming::Page(bytes) => match fd.take_page(&bytes) {
                     Ok(()) => continue,
@@ -233,8 +373,18 @@ async fn push<F: Fetcher>(
     let pinged = Instant::now();
     let _ = out.send((f.reaches_server(), Message::Ping(Vec::new().into())));
 
-    // What the frame loop held at its last state: what it no longer holds was evicted.
-    let mut held: HashSet<u32> = HashSet::new();
+    // What the frame loop held at its last state: what it no longer holds was evicted. A
+    // reopened session starts from what the cache holds, and tells the server.
+    let mut held: HashSet<u32> = state
+        .borrow()
+        .as_ref()
+        .map(|a| a.held.iter().copied().collect())
+        .unwrap_or_default();
+    if !held.is_empty() {
+        send(&StreamClient::Holding(portico_protocol::encode_held(
+            held.iter().copied(),
+        )));
+    }
     let mut lacking: Vec<u32> = Vec::new();
     let mut last_observer = Instant::now();
     let ended = loop {
@@ -281,8 +431,10 @@ async fn push<F: Fetcher>(
                         continue;
                     }
                     Some(Ok(Message::Close(c))) => {
+                        let stale = c.as_ref().is_some_and(|c| u16::from(c.code) == CLOSE_STALE);
                         let why = c.map(|c| format!(" ({}: {})", c.code, c.reason)).unwrap_or_default();
-                        break Ended::Failed(format!("{shown}: the server ended the session{why}"));
+                        let why = format!("{shown}: the server ended the session{why}");
+                        break if stale { Ended::Stale(why) } else { Ended::Failed(why) };
                     }
                     Some(Ok(_)) => continue,
                     Some(Err(e)) => break Ended::Failed(format!("{shown}: the session broke: {e}")),

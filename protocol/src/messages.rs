@@ -273,7 +273,17 @@ pub enum StreamClient {
     /// The client started from the [`crate::CoreManifest`]: from now on the server sends each
     /// cell's [`crate::Page`] (a [`crate::FRAME_PAGE`]) before that cell's stab list, once.
     Pages,
+    /// What the client's cache already holds when the session opens (a session reopened after
+    /// the last one ended), delta-coded as [`encode_held`] codes it: the server's mirror starts
+    /// from it, so nothing the client holds is pushed again.
+    Holding(Vec<u32>),
 }
+
+/// WebSocket close code of a stream session whose URL names a database the server no longer
+/// serves (rebuilt and reloaded): like HTTP's `410 Gone`, the client must read the manifest
+/// again; reopening the same URL cannot help. (4000–4999 are the application's codes,
+/// RFC 6455 §7.4.2.)
+pub const CLOSE_STALE: u16 = 4410;
 
 /// Most segment ids in one [`StreamClient::Lacking`].
 pub const MAX_LACKING: usize = 4096;

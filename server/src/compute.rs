@@ -4,12 +4,15 @@
 //! computed on tokio's blocking pool, at most [`Compute::slots`] at a time, with a deadline that
 //! the computation itself checks ([`portico_data::prefetch::Budget`]): waiting for a slot counts
 //! against it, and when it passes the request gets a 503 and the worker is free again. So a
-//! flood of requests slows those requests, never `/healthz` or segment reads.
+//! flood of requests slows those requests, never `/healthz` or segment reads. A computation
+//! whose asker stops waiting (a client that hung up, a stream session that ended) is cancelled
+//! through the same [`Budget`]: no work goes on for nobody.
 
 use crate::error::Error;
 use axum::http::StatusCode;
 use portico_data::prefetch::Budget;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
 use std::time::{Duration, Instant};
 use tokio::sync::Semaphore;
 
@@ -59,9 +62,13 @@ impl Compute {
                 Ok(Ok(p)) => p,
                 _ => return Err(busy()),
             };
+        // Dropping this future (the asker is gone) sets the flag; the computation's next
+        // budget check stops it.
+        let cancel = Cancel(Arc::new(AtomicBool::new(false)));
+        let budget = Budget::until(until).cancelled_by(cancel.0.clone());
         let job = tokio::task::spawn_blocking(move || {
             let _slot = permit;
-            f(Budget::until(until))
+            f(budget)
         });
         match job.await {
             Ok(r) => r,
@@ -74,6 +81,15 @@ impl Compute {
                 ))
             }
         }
+    }
+}
+
+/// Sets its flag when dropped: the computation's asker stopped waiting.
+struct Cancel(Arc<AtomicBool>);
+
+impl Drop for Cancel {
+    fn drop(&mut self) {
+        self.0.store(true, Relaxed);
     }
 }
 
@@ -97,6 +113,31 @@ mod tests {
         assert!(t0.elapsed() < Duration::from_millis(500));
         // The slot is free again.
         assert_eq!(c.run(|_| Ok(7)).await.unwrap(), 7);
+    }
+
+    #[tokio::test]
+    async fn a_computation_whose_asker_went_away_is_cancelled() {
+        let c = Compute::new(1, Duration::from_secs(60));
+        let (tx, rx) = std::sync::mpsc::channel();
+        let asked = c.run(move |b| {
+            let t0 = Instant::now();
+            while b.check().is_ok() && t0.elapsed() < Duration::from_secs(20) {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            let _ = tx.send(t0.elapsed());
+            Ok(())
+        });
+        // The asker waits 50 ms, then gives up (a client hanging up).
+        let _ = tokio::time::timeout(Duration::from_millis(50), asked).await;
+        let ran = tokio::task::spawn_blocking(move || rx.recv_timeout(Duration::from_secs(30)))
+            .await
+            .unwrap()
+            .expect("the computation ended");
+        assert!(ran < Duration::from_secs(2), "ran {ran:?} for nobody");
+        // And its slot is free at once.
+        let t0 = Instant::now();
+        assert_eq!(c.run(|_| Ok(3)).await.unwrap(), 3);
+        assert!(t0.elapsed() < Duration::from_secs(1));
     }
 
     #[tokio::test]

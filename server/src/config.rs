@@ -20,8 +20,8 @@ pub struct Config {
     pub request_timeout: Duration,
     /// A stream session that sends nothing for this long is closed.
     pub idle_timeout: Duration,
-    /// A stream session whose client takes longer than this to take one message is closed
-    /// (a client that never reads cannot keep its slot).
+    /// A connection whose client takes no bytes of an answer (a stream session: of one
+    /// message) for this long is closed: a client that never reads cannot keep its slot.
     pub write_timeout: Duration,
     /// Deadline of one prefetch computation, waiting for a compute slot included.
     pub compute_deadline: Duration,

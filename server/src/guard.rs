@@ -153,7 +153,16 @@ fn as_json(resp: Response) -> Response {
         header::CONTENT_TYPE,
         HeaderValue::from_static("application/json"),
     );
-    parts.headers.remove(header::CONTENT_LENGTH);
+    // The body is ours now: nothing said about the one it replaces (its coding, its
+    // validators) is true of it.
+    for h in [
+        header::CONTENT_LENGTH,
+        header::CONTENT_ENCODING,
+        header::ETAG,
+        header::LAST_MODIFIED,
+    ] {
+        parts.headers.remove(h);
+    }
     Response::from_parts(parts, Body::from(bytes))
 }
 

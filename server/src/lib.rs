@@ -22,6 +22,7 @@ pub mod process;
 pub mod routes;
 pub mod state;
 pub mod stream;
+pub mod timed;
 pub mod track;
 pub mod viewer;
 
@@ -55,7 +56,8 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/db/{db}/batch", get(routes::batch_in))
         .route("/v1/segments/{id}", get(routes::segment))
         .route("/v1/batch", get(routes::batch))
-        .route("/v1/stream", get(stream::upgrade));
+        .route("/v1/stream", get(stream::upgrade))
+        .route("/v1/db/{db}/stream", get(stream::upgrade_in));
     // Without a token there is nothing to check: no layer at all on the hot path.
     let api = match state.config.token {
         Some(_) => api.route_layer(middleware::from_fn_with_state(state.clone(), auth)),
@@ -74,7 +76,7 @@ pub fn router(state: Arc<AppState>) -> Router {
 }
 
 /// Bearer-token check for `/v1/*` when a token is configured: the `Authorization` header, and
-/// for the WebSocket upgrade of `/v1/stream` only (browsers cannot set headers there) a
+/// for the WebSocket upgrade of the stream only (browsers cannot set headers there) a
 /// `?token=` query. A query token anywhere else is refused: query strings end up in access logs.
 async fn auth(State(s): State<Arc<AppState>>, req: Request, next: Next) -> Response {
     let Some(token) = &s.config.token else {
@@ -85,7 +87,9 @@ async fn auth(State(s): State<Arc<AppState>>, req: Request, next: Next) -> Respo
         .get(header::AUTHORIZATION)
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.strip_prefix("Bearer "));
-    let upgrade = req.uri().path() == "/v1/stream" && req.headers().contains_key(header::UPGRADE);
+    let path = req.uri().path();
+    let stream = path == "/v1/stream" || (path.starts_with("/v1/db/") && path.ends_with("/stream"));
+    let upgrade = stream && req.headers().contains_key(header::UPGRADE);
     let from_query = upgrade
         .then(|| req.uri().query())
         .flatten()

@@ -14,6 +14,7 @@
 
 use crate::config::Config;
 use crate::state::AppState;
+use crate::timed::{Stall, Timed};
 use hyper_util::rt::{TokioExecutor, TokioIo, TokioTimer};
 use hyper_util::server::conn::auto::Builder;
 use hyper_util::server::graceful::GracefulShutdown;
@@ -35,6 +36,10 @@ const RESERVED_FDS: u64 = 64;
 /// After a reload, how long the old generation's connections may start a request before idle
 /// ones are closed (one accepted just before the swap has not sent its request yet).
 const SETTLE: Duration = Duration::from_secs(1);
+
+/// At the connection cap, a connection whose writes have been stuck this long may be closed to
+/// make room (a client that stopped reading; one on a slow link makes progress sooner).
+const STUCK: Duration = Duration::from_secs(1);
 
 /// Largest buffer for one request's head (bytes): larger heads get hyper's own 431.
 const MAX_HEAD_BUFFER: usize = 64 << 10;
@@ -105,8 +110,8 @@ struct Generation {
     graceful: GracefulShutdown,
     tasks: JoinSet<()>,
     /// Connections in the order they were accepted, with whether they have sent a whole
-    /// request head yet (pruned as they start or end).
-    waiting: VecDeque<(AbortHandle, Arc<AtomicBool>)>,
+    /// request head yet and since when their writes are stuck (pruned as they end).
+    waiting: VecDeque<(AbortHandle, Arc<AtomicBool>, Stall)>,
 }
 
 impl Generation {
@@ -120,14 +125,24 @@ impl Generation {
         }
     }
 
-    /// Closes the oldest open connection that has not sent a whole request head; false if
-    /// every connection has. Slowloris sockets go first, real clients (who send their head at
-    /// once) are never shed.
-    fn shed_one(&mut self) -> bool {
-        self.waiting
-            .retain(|(task, started)| !task.is_finished() && !started.load(Relaxed));
-        match self.waiting.pop_front() {
-            Some((task, _)) => {
+    /// Closes the oldest open connection that has not sent a whole request head, else the one
+    /// whose writes have been stuck longest (at least [`STUCK`]); false if there is none.
+    /// Slowloris sockets and clients that stopped reading go first; real clients (who send
+    /// their head at once and read their answers) are never shed.
+    fn shed_one(&mut self, epoch: std::time::Instant) -> bool {
+        self.waiting.retain(|(task, ..)| !task.is_finished());
+        let idle = self
+            .waiting
+            .iter()
+            .position(|(_, started, _)| !started.load(Relaxed));
+        let stuck = || {
+            let stuck_for = |i: usize| self.waiting[i].2.stuck_for(epoch);
+            (0..self.waiting.len())
+                .filter(|&i| stuck_for(i).is_some_and(|d| d >= STUCK))
+                .max_by_key(|&i| stuck_for(i))
+        };
+        match idle.or_else(stuck).and_then(|i| self.waiting.remove(i)) {
+            Some((task, ..)) => {
                 task.abort();
                 self.state.metrics.shed_connections.fetch_add(1, Relaxed);
                 true
@@ -157,7 +172,7 @@ impl Generation {
         self.tasks.abort_all();
         // Sessions have their own tasks (after the upgrade); they watch `shutdown` and end at
         // once, or within their write timeout. Give them what is left of the drain time.
-        let sessions = || self.state.metrics.sessions.load(Relaxed).max(0) as u64;
+        let sessions = || self.state.sessions_open();
         while sessions() > 0 && start.elapsed() < drain {
             tokio::time::sleep(Duration::from_millis(10)).await;
         }
@@ -186,6 +201,7 @@ pub async fn run(
         .header_read_timeout(config.header_timeout)
         .max_buf_size(MAX_HEAD_BUFFER);
     let mut current = Generation::new(state);
+    let epoch = std::time::Instant::now();
     let on_drain = Arc::new(on_drain);
     let mut draining = JoinSet::new();
     loop {
@@ -206,7 +222,7 @@ pub async fn run(
                     Ok(p) => Some(p),
                     // Full: make room by closing the oldest connection that has not sent one
                     // whole request head (a slow or silent socket), else refuse this one.
-                    Err(_) if current.shed_one() => tokio::time::timeout(
+                    Err(_) if current.shed_one(epoch) => tokio::time::timeout(
                         Duration::from_millis(50),
                         slots.clone().acquire_owned(),
                     )
@@ -221,6 +237,9 @@ pub async fn run(
                     continue;
                 };
                 let started = Arc::new(AtomicBool::new(false));
+                let stall = Stall::default();
+                let io = Timed::new(stream, config.write_timeout, stall.clone(), epoch)
+                    .counting(current.state.metrics.clone());
                 let service = TowerToHyperService::new(Started {
                     inner: current.router.clone(),
                     started: started.clone(),
@@ -229,10 +248,10 @@ pub async fn run(
                 let builder = builder.clone();
                 let task = current.tasks.spawn(async move {
                     let _slot = permit;
-                    let conn = builder.serve_connection_with_upgrades(TokioIo::new(stream), service);
+                    let conn = builder.serve_connection_with_upgrades(TokioIo::new(io), service);
                     let _ = watcher.watch(conn).await;
                 });
-                current.waiting.push_back((task, started));
+                current.waiting.push_back((task, started, stall));
                 // Reap finished connection tasks so the set does not grow.
                 while current.tasks.try_join_next().is_some() {}
             }

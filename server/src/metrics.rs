@@ -5,9 +5,9 @@ use std::fmt::Write;
 use std::sync::atomic::{AtomicI64, AtomicU64, Ordering::Relaxed};
 
 /// The routes we count separately.
-pub const ROUTES: [&str; 10] = [
-    "healthz", "metrics", "manifest", "cells", "segment", "batch", "prefetch", "stream", "other",
-    "denied",
+pub const ROUTES: [&str; 13] = [
+    "healthz", "metrics", "manifest", "core", "page", "cells", "segment", "batch", "prefetch",
+    "stream", "viewer", "other", "denied",
 ];
 
 /// Upper bounds (seconds) of the latency histogram buckets.
@@ -54,13 +54,23 @@ pub struct Metrics {
     update_count: AtomicU64,
     /// Connections over the cap, answered 503 and closed.
     pub refused_connections: AtomicU64,
-    /// Connections closed at the cap to make room: the oldest that had not sent a request.
+    /// Connections closed at the cap to make room: the oldest that had not sent a request,
+    /// else the one whose write has been stuck longest.
     pub shed_connections: AtomicU64,
+    /// Connections closed because the client took no bytes of an answer for the write timeout.
+    pub write_timeouts: AtomicU64,
+    /// Stream sessions refused because their URL named a database no longer served.
+    pub stream_stale: AtomicU64,
+    /// Stream need lists stopped at their deadline (the session waits as long before its next).
+    pub stream_overdue: AtomicU64,
 }
 
 /// Index of a route name in [`ROUTES`] (`other` when unknown).
 pub fn route_index(name: &str) -> usize {
-    ROUTES.iter().position(|r| *r == name).unwrap_or(8)
+    ROUTES
+        .iter()
+        .position(|r| *r == name)
+        .unwrap_or(ROUTES.len() - 2)
 }
 
 impl Metrics {
@@ -171,7 +181,7 @@ impl Metrics {
         let sum = self.update_sum_us.load(Relaxed) as f64 / 1e6;
         let _ = writeln!(s, "portico_stream_update_seconds_sum {sum}");
         let _ = writeln!(s, "portico_stream_update_seconds_count {n}");
-        let gauges: [(&str, &str, &str, i64); 10] = [
+        let gauges: [(&str, &str, &str, i64); 13] = [
             (
                 "portico_stream_updates_total",
                 "counter",
@@ -229,8 +239,26 @@ impl Metrics {
             (
                 "portico_shed_connections_total",
                 "counter",
-                "Connections without a request closed at the cap to make room.",
+                "Connections without a request, or stuck writing, closed at the cap to make room.",
                 self.shed_connections.load(Relaxed) as i64,
+            ),
+            (
+                "portico_write_timeouts_total",
+                "counter",
+                "Connections closed because the client took nothing for the write timeout.",
+                self.write_timeouts.load(Relaxed) as i64,
+            ),
+            (
+                "portico_stream_stale_total",
+                "counter",
+                "Stream sessions refused: their URL named a database no longer served.",
+                self.stream_stale.load(Relaxed) as i64,
+            ),
+            (
+                "portico_stream_overdue_total",
+                "counter",
+                "Stream need lists stopped at the prefetch deadline.",
+                self.stream_overdue.load(Relaxed) as i64,
             ),
         ];
         for (name, kind, help, v) in gauges {

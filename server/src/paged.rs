@@ -5,33 +5,49 @@
 //! sees (median 10 KB).
 
 use crate::encoding::Precompressed;
+use crate::encoding::accepts_gzip;
 use crate::error::Error;
-use crate::routes::{IMMUTABLE, current, document, wants_bincode};
+use crate::routes::{IMMUTABLE, current, document, not_modified, revalidated, wants_bincode};
 use crate::state::AppState;
 use axum::extract::{Path, State};
-use axum::http::{HeaderMap, HeaderValue, header};
-use axum::response::Response;
+use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
+use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
 use portico_data::Database;
 use portico_data::cells::CellGraph;
 use portico_protocol::{CoreManifest, PROTOCOL_VERSION, SegmentInfo};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 
-/// Most bytes the encoded pages kept may take (bincode, gzip and the push frame of each; a
-/// page of flattened `mega` is 40 KB in all at the median, 1.2 MB at most).
+/// Most bytes the pages kept may take (counted at twice their bincode: the gzip coding and
+/// the push frame, each made on first use, are about a third of it each; a page of flattened
+/// `mega` is 31 KB of bincode at the median, 1.2 MB at most).
 pub const PAGE_CACHE_BYTES: usize = 64 << 20;
 
-/// A cell's page, encoded every way it is sent.
+/// A cell's page: its bincode, and each coding it is sent in, made when first sent (CPU work:
+/// on a compute slot).
 pub struct EncodedPage {
-    /// Bincode, and its gzip coding (`GET /v1/db/{db}/pages/{cell}`).
-    pub coded: Precompressed,
+    bincode: Bytes,
+    /// Bincode and its gzip coding (`GET /v1/db/{db}/pages/{cell}`).
+    coded: OnceLock<Precompressed>,
     /// The push stream's [`portico_protocol::FRAME_PAGE`] (tag byte, then deflated bincode).
-    pub frame: Bytes,
+    frame: OnceLock<Bytes>,
 }
 
 impl EncodedPage {
     fn bytes(&self) -> usize {
-        self.coded.identity.len() + self.coded.gzip.len() + self.frame.len()
+        2 * self.bincode.len()
+    }
+
+    /// The page as `GET /v1/db/{db}/pages/{cell}` sends it (gzip made on first use).
+    pub fn coded(&self) -> &Precompressed {
+        self.coded
+            .get_or_init(|| Precompressed::new(self.bincode.clone()))
+    }
+
+    /// The page as the push stream sends it (deflated on first use).
+    pub fn frame(&self) -> &Bytes {
+        self.frame
+            .get_or_init(|| Bytes::from(portico_protocol::deflate_page(&self.bincode)))
     }
 }
 
@@ -49,6 +65,16 @@ impl Default for Pages {
 }
 
 impl Pages {
+    /// Pages kept now.
+    pub fn len(&self) -> usize {
+        self.cache.lock().unwrap_or_else(|e| e.into_inner()).0.len()
+    }
+
+    /// Whether no page is kept.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
     fn get(&self, cell: u32) -> Option<Arc<EncodedPage>> {
         let mut c = self.cache.lock().unwrap_or_else(|e| e.into_inner());
         c.0.get(&cell).cloned()
@@ -106,8 +132,8 @@ pub fn core_bincode(
 }
 
 impl AppState {
-    /// Cell `cell`'s page, encoded, made on first use (CPU work: callers run it on a compute
-    /// slot, [`crate::compute`]).
+    /// Cell `cell`'s page, bincode-encoded, made on first use (CPU work: callers run it on a
+    /// compute slot, [`crate::compute`], and make the coding they send there too).
     ///
     /// # Errors
     /// 404 for a cell that does not exist or has no stab list (dead, or no cells at all); 500
@@ -130,19 +156,19 @@ impl AppState {
         let page = db.header().page(cell, seg, &stab, &|s| row(db, s), graph);
         let bincode = portico_protocol::to_bincode(&page)
             .map_err(|e| Error::internal("page does not encode", e))?;
-        let frame = Bytes::from(portico_protocol::deflate_page(&bincode));
         let p = Arc::new(EncodedPage {
-            coded: Precompressed::new(Bytes::from(bincode)),
-            frame,
+            bincode: Bytes::from(bincode),
+            coded: OnceLock::new(),
+            frame: OnceLock::new(),
         });
         self.pages.put(cell, p.clone());
         Ok(p)
     }
 
-    /// Cell `cell`'s page if it is made already (the push stream warms its pages on the compute
-    /// slot that makes its need list, and never makes one on an async worker).
-    pub fn page_made(&self, cell: u32) -> Option<Arc<EncodedPage>> {
-        self.pages.get(cell)
+    /// Cell `cell`'s push frame if it is made already (the push stream makes its pages on the
+    /// compute slot that makes its need list, and never makes one on an async worker).
+    pub fn page_frame(&self, cell: u32) -> Option<Bytes> {
+        self.pages.get(cell)?.frame.get().cloned()
     }
 }
 
@@ -196,9 +222,34 @@ pub async fn page(
             ),
         ));
     }
+    if s.prefetcher.stab_segment(cell).is_none() {
+        return Err(Error::not_found(format!(
+            "cell {cell} has no page: it is not a live cell of this database"
+        )));
+    }
+    // The URL names the database: a client that holds the coding its Accept-Encoding picks
+    // (a page's gzip is always the smaller) has the page, which is not made to say so.
+    let name = format!("p-{cell}");
+    let held = format!(
+        "\"{name}-b{}\"",
+        if accepts_gzip(&headers) { "-gzip" } else { "" }
+    );
+    if not_modified(&headers, &held) {
+        let mut r = revalidated(StatusCode::NOT_MODIFIED.into_response(), &held);
+        r.headers_mut()
+            .insert(header::CACHE_CONTROL, HeaderValue::from_static(IMMUTABLE));
+        return Ok(r);
+    }
     let state = s.clone();
-    let p = s.compute.run(move |_| state.page(cell)).await?;
-    let mut r = document(&headers, true, &p.coded, &format!("p-{cell}"));
+    let p = s
+        .compute
+        .run(move |_| {
+            let p = state.page(cell)?;
+            p.coded();
+            Ok(p)
+        })
+        .await?;
+    let mut r = document(&headers, true, p.coded(), &name);
     r.headers_mut()
         .insert(header::CACHE_CONTROL, HeaderValue::from_static(IMMUTABLE));
     Ok(r)

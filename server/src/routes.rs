@@ -23,6 +23,9 @@ pub const IMMUTABLE: &str = "public, max-age=31536000, immutable";
 pub const REVALIDATE: &str = "no-cache";
 /// Largest read budget a prefetch request may ask for (bytes).
 pub const MAX_READ_BYTES: u64 = 1 << 30;
+/// Longest frame time a policy may give (seconds): a frame is a person's step at most, and
+/// the server counts deadlines and pacing in frames (a huge one overflowed its clock).
+pub const MAX_FRAME_TIME_S: f32 = 10.0;
 
 type Shared = State<Arc<AppState>>;
 
@@ -188,13 +191,38 @@ fn parse_id(raw: &str, s: &AppState) -> Result<u32, Error> {
 
 /// `If-None-Match` with the weak comparison RFC 9110 §13.1.2 prescribes for it: `W/"x"` matches
 /// `"x"`.
-fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
+pub(crate) fn not_modified(headers: &HeaderMap, etag: &str) -> bool {
     let strip = |t: &str| t.trim().trim_start_matches("W/").to_string();
     let etag = strip(etag);
     headers
         .get(header::IF_NONE_MATCH)
         .and_then(|v| v.to_str().ok())
         .is_some_and(|v| v.split(',').any(|t| strip(t) == etag || t.trim() == "*"))
+}
+
+/// Whether a `Range` may be served under the request's `If-Range` (RFC 9110 §13.1.5): no
+/// `If-Range`; an entity tag that is strong and equals `etag`; or a date that equals
+/// `last_modified` exactly. Anything else asks for the whole representation (200).
+pub fn if_range_holds(
+    headers: &HeaderMap,
+    etag: &str,
+    last_modified: Option<std::time::SystemTime>,
+) -> bool {
+    let Some(v) = headers.get(header::IF_RANGE) else {
+        return true;
+    };
+    let Ok(v) = v.to_str() else { return false };
+    let v = v.trim();
+    if v.starts_with('"') {
+        return v == etag;
+    }
+    if v.starts_with("W/") {
+        return false;
+    }
+    match (httpdate::parse_http_date(v), last_modified) {
+        (Ok(date), Some(modified)) => httpdate::HttpDate::from(date) == modified.into(),
+        _ => false,
+    }
 }
 
 /// A `Range` header that cannot be served (answered with 416).
@@ -283,7 +311,11 @@ fn segment_answer(
     }
     let bytes = s.db().segment(id)?;
     let len = bytes.len() as u64;
-    let range = match headers.get(header::RANGE).and_then(|v| v.to_str().ok()) {
+    let asked = headers
+        .get(header::RANGE)
+        .and_then(|v| v.to_str().ok())
+        .filter(|_| if_range_holds(headers, etag.to_str().unwrap_or(""), None));
+    let range = match asked {
         None => None,
         Some(v) => parse_range(v, len).map_err(|Unsatisfiable| {
             Error::new(
@@ -447,13 +479,20 @@ pub fn validate_observer(o: &portico_protocol::Observer) -> Result<(), Error> {
     Ok(())
 }
 
-/// A policy's numbers are finite and within bounds.
+/// A policy's numbers are finite and within bounds (a frame time of at most
+/// [`MAX_FRAME_TIME_S`]).
 pub fn validate_policy(p: &portico_protocol::Policy) -> Result<(), Error> {
     let scalars = [p.frame_time_s, p.size_threshold_px];
     if scalars.iter().any(|x| !x.is_finite() || *x < 0.0) {
         return Err(Error::bad_request(
             "policy numbers must be finite and not negative",
         ));
+    }
+    if p.frame_time_s > MAX_FRAME_TIME_S {
+        return Err(Error::bad_request(format!(
+            "frame_time_s {} is more than {MAX_FRAME_TIME_S} s",
+            p.frame_time_s
+        )));
     }
     if p.depth_frames > 100_000 || p.screen.iter().any(|&d| d == 0 || d > 32_768) {
         return Err(Error::bad_request(

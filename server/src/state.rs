@@ -20,8 +20,8 @@ pub struct AppState {
     pub config: Config,
     /// Where prefetch answers are computed (off the async workers, within a deadline).
     pub compute: Compute,
-    /// Counters and histograms.
-    pub metrics: Metrics,
+    /// Counters and histograms (kept across reloads: [`AppState::open_after`]).
+    pub metrics: Arc<Metrics>,
     /// Strong identifier of the file's contents (the manifest's ETag).
     pub database_id: String,
     /// The manifest, bincode-encoded and gzip-compressed once at start-up.
@@ -59,8 +59,26 @@ impl AppState {
         Self::new(db, config)
     }
 
+    /// [`AppState::open`] for a reload: the counters go on from `previous`'s.
+    pub fn open_after(
+        path: &std::path::Path,
+        config: Config,
+        previous: &AppState,
+    ) -> Result<Arc<AppState>, DataError> {
+        let db = Arc::new(Database::open(path)?);
+        Self::with_metrics(db, config, previous.metrics.clone())
+    }
+
     /// Wraps an already open database.
     pub fn new(db: Arc<Database>, config: Config) -> Result<Arc<AppState>, DataError> {
+        Self::with_metrics(db, config, Arc::default())
+    }
+
+    fn with_metrics(
+        db: Arc<Database>,
+        config: Config,
+        metrics: Arc<Metrics>,
+    ) -> Result<Arc<AppState>, DataError> {
         let p = db.prologue();
         let database_id = format!("{:016x}{:016x}", p.header_checksum, p.index_checksum);
         let manifest = manifest(&db, &database_id);
@@ -101,7 +119,7 @@ impl AppState {
             prefetcher,
             compute: Compute::new(config.compute_slots, config.compute_deadline),
             config,
-            metrics: Metrics::default(),
+            metrics,
             database_id,
             manifest_bincode,
             core_bincode,
@@ -113,6 +131,14 @@ impl AppState {
             sessions,
             shutdown: watch::channel(false).0,
         }))
+    }
+
+    /// Stream sessions open on this database (the gauge in [`Metrics`] counts every
+    /// generation's).
+    pub fn sessions_open(&self) -> u64 {
+        self.config
+            .max_sessions
+            .saturating_sub(self.sessions.available_permits()) as u64
     }
 
     /// The database.

@@ -114,11 +114,14 @@ fn route_name(path: &str) -> &'static str {
         "/healthz" => "healthz",
         "/metrics" => "metrics",
         "/v1/manifest" => "manifest",
+        "/v1/manifest/core" => "core",
+        "/v1/db/{db}/pages/{cell}" => "page",
+        "/" | "/index.html" | "/portico_web.js" | "/portico_web_bg.wasm" => "viewer",
         "/v1/cells" => "cells",
         "/v1/segments/{id}" | "/v1/db/{db}/segments/{id}" => "segment",
         "/v1/batch" | "/v1/db/{db}/batch" => "batch",
         "/v1/prefetch" | "/v1/db/{db}/prefetch" => "prefetch",
-        "/v1/stream" => "stream",
+        "/v1/stream" | "/v1/db/{db}/stream" => "stream",
         _ => "other",
     }
 }

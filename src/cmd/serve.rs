@@ -130,6 +130,7 @@ pub fn run(a: Args) -> Result<()> {
         let mut signals = watch_signals()?;
         let (control, rx) = tokio::sync::mpsc::unbounded_channel();
         let listener = tokio::net::TcpListener::from_std(listener)?;
+        let mut serving = state.clone();
         let server = tokio::spawn(listen::run(listener, state, rx, move |reload, d: Drained| {
             let what = if reload { "reload" } else { "stop" };
             if d.closed == 0 && d.sessions_left == 0 {
@@ -147,13 +148,14 @@ pub fn run(a: Args) -> Result<()> {
                 // SIGHUP: a rebuild renamed a new file over the old one. New connections get it
                 // at once; the old map stays valid until its last request is done. If it does
                 // not open, say why and keep serving the old one.
-                Stop::Reload => match AppState::open(&a.file, config.clone()) {
+                Stop::Reload => match AppState::open_after(&a.file, config.clone(), &serving) {
                     Ok(new) => {
                         let (swapped, done) = tokio::sync::oneshot::channel();
                         let _ = control.send(Control::Reload(new.clone(), swapped));
                         if done.await.is_ok() {
                             announce(&new, addr);
                         }
+                        serving = new;
                     }
                     Err(e) => eprintln!("reload failed, still serving the previous file: {e}"),
                 },

@@ -229,6 +229,12 @@ impl Io {
             }
         }
         if let Some(why) = stream.closed() {
+            if stream.stale() {
+                out.push(Arrival::Stale(why));
+                self.stream = None;
+                self.push = false;
+                return;
+            }
             out.push(Arrival::Failed(format!("{why}; pulling over HTTP")));
             self.stream = None;
             self.retry_at = Some(now + RETRY);
@@ -263,7 +269,13 @@ impl Io {
         }
         let now = Instant::now();
         if self.stream.is_none() && self.retry_at.is_none_or(|t| now >= t) {
-            match Stream::open(self.remote.base(), self.remote.token(), self.policy) {
+            let db = self.remote.database();
+            match Stream::open(
+                self.remote.base(),
+                db.as_deref(),
+                self.remote.token(),
+                self.policy,
+            ) {
                 Ok(s) => {
                     self.stream = Some((s, now));
                     self.sessions += 1;

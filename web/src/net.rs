@@ -56,6 +56,11 @@ impl Remote {
         }
     }
 
+    /// The database id of the manifest read (`None` before it).
+    pub fn database(&self) -> Option<String> {
+        self.database.borrow().clone()
+    }
+
     /// The server's base URL (`""`: the page's origin).
     pub fn base(&self) -> &str {
         &self.base

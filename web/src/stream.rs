@@ -32,11 +32,15 @@ pub struct Stream {
     open: Rc<Cell<bool>>,
     /// Why the socket closed, once it has.
     closed: Rc<RefCell<Option<String>>>,
+    /// Whether it closed because the server serves another database now.
+    stale: Rc<Cell<bool>>,
     _callbacks: Vec<Closure<dyn FnMut(JsValue)>>,
 }
 
-/// The stream's URL for an API base (`""`: the page's origin).
-fn url(base: &str) -> Result<String, String> {
+/// The stream's URL for an API base (`""`: the page's origin) and the database the page's
+/// manifest describes (the server closes a session on another with
+/// [`portico_protocol::CLOSE_STALE`]).
+fn url(base: &str, db: Option<&str>) -> Result<String, String> {
     let http = if base.is_empty() {
         web_sys::window()
             .ok_or("no window")?
@@ -53,16 +57,23 @@ fn url(base: &str) -> Result<String, String> {
     } else {
         return Err(format!("{http}: not an http(s) address"));
     };
-    Ok(format!("{}/v1/stream", ws.trim_end_matches('/')))
+    let path = db.map_or("/v1/stream".to_string(), |d| format!("/v1/db/{d}/stream"));
+    Ok(format!("{}{path}", ws.trim_end_matches('/')))
 }
 
 impl Stream {
-    /// Opens a session with the server at `base`; `Hello` goes as soon as it opens.
+    /// Opens a session with the server at `base` on database `db`; `Hello` goes as soon as it
+    /// opens.
     /// `token`: the server's `--token`, given as `?token=` (a browser cannot set headers on a
     /// WebSocket).
-    pub fn open(base: &str, token: Option<&str>, policy: Policy) -> Result<Stream, String> {
+    pub fn open(
+        base: &str,
+        db: Option<&str>,
+        token: Option<&str>,
+        policy: Policy,
+    ) -> Result<Stream, String> {
         // Messages name `url`; only the socket gets the token.
-        let url = url(base)?;
+        let url = url(base, db)?;
         let with_token = match token {
             Some(t) => format!(
                 "{url}?token={}",
@@ -121,13 +132,18 @@ impl Stream {
         ws.set_onmessage(Some(on_message.as_ref().unchecked_ref()));
         callbacks.push(on_message);
 
-        let (o, c, u) = (open.clone(), closed.clone(), url.clone());
+        let stale = Rc::new(Cell::new(false));
+        let (o, c, u, st) = (open.clone(), closed.clone(), url.clone(), stale.clone());
         let on_close = Closure::<dyn FnMut(JsValue)>::new(move |e: JsValue| {
             o.set(false);
-            let why = e
+            let (code, why) = e
                 .dyn_into::<CloseEvent>()
-                .map(|e| format!("{u}: closed ({}{})", e.code(), reason(&e.reason())))
-                .unwrap_or_else(|_| format!("{u}: closed"));
+                .map(|e| {
+                    let why = format!("{u}: closed ({}{})", e.code(), reason(&e.reason()));
+                    (e.code(), why)
+                })
+                .unwrap_or_else(|_| (0, format!("{u}: closed")));
+            st.set(code == portico_protocol::CLOSE_STALE);
             c.borrow_mut().get_or_insert(why);
         });
         ws.set_onclose(Some(on_close.as_ref().unchecked_ref()));
@@ -138,6 +154,7 @@ impl Stream {
             inbox,
             open,
             closed,
+            stale,
             _callbacks: callbacks,
         })
     }
@@ -150,6 +167,12 @@ impl Stream {
     /// Why the session ended, once it has.
     pub fn closed(&self) -> Option<String> {
         self.closed.borrow().clone()
+    }
+
+    /// Whether the server closed it because it serves another database now
+    /// ([`portico_protocol::CLOSE_STALE`]): opening it again cannot help.
+    pub fn stale(&self) -> bool {
+        self.stale.get()
     }
 
     /// What arrived since the last call, oldest first, up to about `budget` bytes (at least

@@ -37,11 +37,14 @@ use std::time::{Duration, Instant};
 pub const MAX_RELEASE_HINTS: usize = 4096;
 
 /// How long one answer may compute: the loops check it and stop with
-/// [`crate::DataError::Deadline`], so no request can hold a worker long.
-#[derive(Debug, Clone, Copy)]
+/// [`crate::DataError::Deadline`], so no request can hold a worker long; and whether whoever
+/// asked for it is still waiting ([`Budget::cancelled_by`]: a request whose client went away,
+/// a stream session that ended), so no work goes on for nobody.
+#[derive(Debug, Clone)]
 pub struct Budget {
     start: Instant,
     deadline: Option<Instant>,
+    cancelled: Option<Arc<std::sync::atomic::AtomicBool>>,
 }
 
 impl Budget {
@@ -50,6 +53,7 @@ impl Budget {
         Budget {
             start: Instant::now(),
             deadline: None,
+            cancelled: None,
         }
     }
 
@@ -58,15 +62,32 @@ impl Budget {
         Budget {
             start: Instant::now(),
             deadline: Some(deadline),
+            cancelled: None,
         }
     }
 
-    /// An error once the deadline has passed.
+    /// Also stops as soon as `flag` is set (by whoever stopped waiting for the answer).
+    pub fn cancelled_by(mut self, flag: Arc<std::sync::atomic::AtomicBool>) -> Budget {
+        self.cancelled = Some(flag);
+        self
+    }
+
+    /// An error once the deadline has passed or the computation was cancelled.
     pub fn check(&self) -> Result<()> {
+        let cancelled = self
+            .cancelled
+            .as_ref()
+            .is_some_and(|c| c.load(std::sync::atomic::Ordering::Relaxed));
         match self.deadline {
+            _ if cancelled => Err(crate::DataError::Deadline(self.start.elapsed())),
             Some(d) if Instant::now() >= d => Err(crate::DataError::Deadline(self.start.elapsed())),
             _ => Ok(()),
         }
+    }
+
+    /// Whether [`Budget::check`] would fail now.
+    pub fn spent(&self) -> bool {
+        self.check().is_err()
     }
 
     /// Time spent since the budget was made.

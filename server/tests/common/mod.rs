@@ -2,6 +2,8 @@
 //! loopback port, and an observer inside a live cell.
 #![allow(dead_code)]
 
+pub mod attack;
+
 use portico_data::Database;
 use portico_data::build::{BuildOptions, Quiet, build};
 use portico_data::import::import_file;
