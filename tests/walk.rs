@@ -7,6 +7,7 @@ use portico_native::walk::{WalkConfig, walk};
 use portico_protocol::Policy;
 use portico_server::AppState;
 use std::path::PathBuf;
+use std::sync::atomic::Ordering::Relaxed;
 
 mod common;
 
@@ -392,8 +393,8 @@ fn a_server_restart_mid_walk_is_survived() {
     let mut running = Some(start(state.clone()));
     let out = dir.path().join("walk");
     let mut cfg = config(format!("http://{addr}"), out, 64 << 20);
-    cfg.max_frames = Some(90);
-    let mut read_after = 0u64;
+    cfg.max_frames = Some(150);
+    let (mut read_after, mut sessions_after) = (0u64, 0u64);
     let s = walk(&cfg, &mut |done, _| {
         if done == 20
             && let Some((stop, t)) = running.take()
@@ -404,13 +405,86 @@ fn a_server_restart_mid_walk_is_survived() {
         if done == 40 {
             running = Some(start(state.clone()));
             read_after = state.metrics.requests("prefetch");
+            sessions_after = state.metrics.sessions_total.load(Relaxed);
         }
     })
     .unwrap();
-    assert_eq!(s.frames, 90, "the walk went on through the outage");
+    assert_eq!(s.frames, 150, "the walk went on through the outage");
     assert!(s.io_failures > 0, "the outage was noticed");
     assert!(
         state.metrics.requests("prefetch") > read_after,
-        "the client came back to the restarted server"
+        "the client read over pull while the stream was down"
     );
+    // Fault 8 of the second hardening round: the client used to finish every walk over pull.
+    assert!(
+        state.metrics.sessions_total.load(Relaxed) > sessions_after,
+        "the client opened its stream again on the restarted server"
+    );
+    assert!(!s.database_changed);
+}
+
+/// Fault 2 of the second hardening round: a stream opened after a rebuild and reload pushed
+/// the new file's segments to a client holding the old manifest (checksum rejections, objects
+/// skipped for the rest of the walk). Now the stream names its database: the reload ends the
+/// session, the reopened one is closed as stale, no segment of the new file reaches the client,
+/// and the walk goes on with what it holds.
+#[test]
+fn a_rebuild_and_reload_mid_walk_sends_no_segment_of_the_new_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let (old, _) = {
+        let db = common::build_tiny(dir.path());
+        (
+            portico_server::AppState::open(&db, Default::default()).unwrap(),
+            db,
+        )
+    };
+    let other = tempfile::tempdir().unwrap();
+    let opts = portico_data::build::BuildOptions {
+        no_hierarchy: true,
+        ..Default::default()
+    };
+    let new = portico_server::AppState::open(
+        &common::build_tiny_with(other.path(), &opts),
+        Default::default(),
+    )
+    .unwrap();
+    assert_ne!(old.database_id, new.database_id);
+    let (control, rx) = tokio::sync::mpsc::unbounded_channel();
+    let (up_tx, up_rx) = std::sync::mpsc::channel();
+    let serving = old.clone();
+    std::thread::spawn(move || {
+        let rt = tokio::runtime::Runtime::new().unwrap();
+        rt.block_on(async move {
+            let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+            up_tx.send(l.local_addr().unwrap()).unwrap();
+            portico_server::listen::run(l, serving, rx, |_, _| {})
+                .await
+                .unwrap();
+        });
+    });
+    let addr = up_rx.recv().unwrap();
+    let mut cfg = config(format!("http://{addr}"), dir.path().join("walk"), 64 << 20);
+    cfg.max_frames = Some(120);
+    let next = new.clone();
+    let s = walk(&cfg, &mut |done, _| {
+        if done == 20 {
+            let (swapped, _) = tokio::sync::oneshot::channel();
+            let _ = control.send(portico_server::listen::Control::Reload(
+                next.clone(),
+                swapped,
+            ));
+        }
+    })
+    .unwrap();
+    assert_eq!(s.frames, 120, "the walk went on");
+    assert!(
+        s.database_changed,
+        "the client learnt that the database changed"
+    );
+    assert_eq!(
+        new.metrics.segments_sent.load(Relaxed),
+        0,
+        "no segment of the new file reached the client"
+    );
+    assert!(old.metrics.segments_sent.load(Relaxed) > 0);
 }
