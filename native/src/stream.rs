@@ -170,7 +170,12 @@ pub async fn run<F: Fetcher>(
                 wait = waited;
             }
             Some(Err(end)) => return stop(end, &tx).await,
-            None => return,
+            // The opener failed (it cannot, short of a panic): pull for the rest of the walk.
+            None => {
+                let never = std::future::pending();
+                drive_after(events, fetcher, policy, parallel, window, state, tx, never).await;
+                return;
+            }
         }
     }
 }

@@ -176,3 +176,41 @@ impl SizeHintExact for Body {
         http_body::Body::size_hint(self).exact()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Fault 6 of the second hardening round: an error answer from a file service kept the
+    /// file's `Content-Encoding: gzip` (and its validators) over the JSON body put in its place.
+    #[test]
+    fn an_error_body_replaced_by_json_carries_nothing_of_the_file() {
+        let file_error = Response::builder()
+            .status(StatusCode::RANGE_NOT_SATISFIABLE)
+            .header(header::CONTENT_ENCODING, "gzip")
+            .header(header::ETAG, "\"abc\"")
+            .header(header::LAST_MODIFIED, "Wed, 21 Oct 2015 07:28:00 GMT")
+            .header(header::CONTENT_RANGE, "bytes */100")
+            .body(Body::from("range not satisfiable"))
+            .unwrap();
+        let r = as_json(file_error);
+        let h = r.headers();
+        assert_eq!(h[header::CONTENT_TYPE], "application/json");
+        for gone in [
+            header::CONTENT_ENCODING,
+            header::ETAG,
+            header::LAST_MODIFIED,
+        ] {
+            assert!(h.get(&gone).is_none(), "{gone} kept");
+        }
+        assert_eq!(h[header::CONTENT_RANGE], "bytes */100");
+        let body = futures_util::FutureExt::now_or_never(axum::body::to_bytes(r.into_body(), 4096))
+            .unwrap()
+            .unwrap();
+        let e: portico_protocol::ApiError = serde_json::from_slice(&body).unwrap();
+        assert_eq!(
+            (e.status, e.message.as_str()),
+            (416, "range not satisfiable")
+        );
+    }
+}

@@ -11,6 +11,7 @@
 //! their latest observer and time out writes ([`stream`]), and every error is JSON ([`guard`]).
 
 pub mod compute;
+pub mod conditional;
 pub mod config;
 pub mod encoding;
 pub mod error;
@@ -88,7 +89,11 @@ async fn auth(State(s): State<Arc<AppState>>, req: Request, next: Next) -> Respo
         .and_then(|v| v.to_str().ok())
         .and_then(|v| v.strip_prefix("Bearer "));
     let path = req.uri().path();
-    let stream = path == "/v1/stream" || (path.starts_with("/v1/db/") && path.ends_with("/stream"));
+    let named = path
+        .strip_prefix("/v1/db/")
+        .and_then(|p| p.strip_suffix("/stream"));
+    let stream =
+        path == "/v1/stream" || named.is_some_and(|db| !db.is_empty() && !db.contains('/'));
     let upgrade = stream && req.headers().contains_key(header::UPGRADE);
     let from_query = upgrade
         .then(|| req.uri().query())

@@ -38,8 +38,9 @@ const RESERVED_FDS: u64 = 64;
 const SETTLE: Duration = Duration::from_secs(1);
 
 /// At the connection cap, a connection whose writes have been stuck this long may be closed to
-/// make room (a client that stopped reading; one on a slow link makes progress sooner).
-const STUCK: Duration = Duration::from_secs(1);
+/// make room: most likely a client that stopped reading, though a client whose link stalls
+/// this long while the server is full loses its connection too (it may reconnect).
+const STUCK: Duration = Duration::from_secs(2);
 
 /// Largest buffer for one request's head (bytes): larger heads get hyper's own 431.
 const MAX_HEAD_BUFFER: usize = 64 << 10;
@@ -127,8 +128,8 @@ impl Generation {
 
     /// Closes the oldest open connection that has not sent a whole request head, else the one
     /// whose writes have been stuck longest (at least [`STUCK`]); false if there is none.
-    /// Slowloris sockets and clients that stopped reading go first; real clients (who send
-    /// their head at once and read their answers) are never shed.
+    /// Slowloris sockets and clients that stopped reading go first; clients that send their
+    /// head at once and keep reading their answers are never shed.
     fn shed_one(&mut self, epoch: std::time::Instant) -> bool {
         self.waiting.retain(|(task, ..)| !task.is_finished());
         let idle = self
@@ -194,7 +195,11 @@ pub async fn run(
 ) -> std::io::Result<()> {
     let config: Config = state.config.clone();
     let slots = Arc::new(Semaphore::new(config.max_connections.max(1)));
-    let mut builder = Builder::new(TokioExecutor::new());
+    let builder = Builder::new(TokioExecutor::new());
+    // HTTP/1.1 only: over h2c a client could hold an answer for ever with a zero flow-control
+    // window, without a single stuck write for the write timeout to see (TLS and HTTP/2 belong
+    // to the proxy in front).
+    let mut builder = builder.http1_only();
     builder
         .http1()
         .timer(TokioTimer::new())
@@ -218,18 +223,22 @@ pub async fn run(
                     }
                 };
                 let _ = stream.set_nodelay(true);
-                let permit = match slots.clone().try_acquire_owned() {
-                    Ok(p) => Some(p),
+                // A stream session's socket outlives its connection task (the upgrade hands it
+                // over): open sessions count against the cap too.
+                let sessions = current.state.metrics.sessions.load(Relaxed).max(0) as usize;
+                let free = slots.available_permits() > sessions;
+                let permit = match slots.clone().try_acquire_owned().ok().filter(|_| free) {
+                    Some(p) => Some(p),
                     // Full: make room by closing the oldest connection that has not sent one
                     // whole request head (a slow or silent socket), else refuse this one.
-                    Err(_) if current.shed_one(epoch) => tokio::time::timeout(
+                    None if current.shed_one(epoch) => tokio::time::timeout(
                         Duration::from_millis(50),
                         slots.clone().acquire_owned(),
                     )
                     .await
                     .ok()
                     .and_then(Result::ok),
-                    Err(_) => None,
+                    None => None,
                 };
                 let Some(permit) = permit else {
                     current.state.metrics.refused_connections.fetch_add(1, Relaxed);

@@ -4,10 +4,11 @@
 //! manifest is 9.6 MB and the cell graph 0.9 MB, then with each stab list the page its cell
 //! sees (median 10 KB).
 
+use crate::conditional::not_modified;
 use crate::encoding::Precompressed;
 use crate::encoding::accepts_gzip;
 use crate::error::Error;
-use crate::routes::{IMMUTABLE, current, document, not_modified, revalidated, wants_bincode};
+use crate::routes::{IMMUTABLE, current, document, revalidated, wants_bincode};
 use crate::state::AppState;
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};

@@ -40,6 +40,9 @@ pub struct AppState {
     cells_json: OnceLock<Precompressed>,
     /// One permit per allowed stream session.
     pub sessions: Arc<Semaphore>,
+    /// Turns for the large stream messages decoded on the blocking pool (one per compute
+    /// slot, across all sessions: [`crate::stream`]).
+    pub heavy: Semaphore,
     /// Flips to `true` when the server shuts down; stream sessions watch it and close.
     pub shutdown: watch::Sender<bool>,
 }
@@ -107,6 +110,7 @@ impl AppState {
             })
             .collect();
         let prefetcher = Prefetcher::new(db)?;
+        let config_slots = config.compute_slots.max(1);
         let core_bincode =
             crate::paged::core_bincode(prefetcher.database(), prefetcher.graph(), &database_id)
                 .map(|b| Precompressed::new(Bytes::from(b)))
@@ -129,6 +133,7 @@ impl AppState {
             manifest_json: OnceLock::new(),
             cells_json: OnceLock::new(),
             sessions,
+            heavy: Semaphore::new(config_slots),
             shutdown: watch::channel(false).0,
         }))
     }

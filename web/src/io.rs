@@ -232,7 +232,7 @@ impl Io {
             if stream.stale() {
                 out.push(Arrival::Stale(why));
                 self.stream = None;
-                self.push = false;
+                self.stopped = true;
                 return;
             }
             out.push(Arrival::Failed(format!("{why}; pulling over HTTP")));
@@ -263,18 +263,21 @@ impl Io {
 
     /// Keeps a stream session going when pushing; `true` while it carries the segments (or
     /// may still open), so pull stays idle.
-    fn pushing(&mut self, observer: Observer) -> bool {
+    /// `held`: what the cache holds, asked for only when a session opens (it tells the server).
+    fn pushing(&mut self, observer: Observer, held: impl FnOnce() -> Vec<u32>) -> bool {
         if !self.push {
             return false;
         }
         let now = Instant::now();
         if self.stream.is_none() && self.retry_at.is_none_or(|t| now >= t) {
             let db = self.remote.database();
+            let base = self.remote.base();
             match Stream::open(
-                self.remote.base(),
+                base,
                 db.as_deref(),
                 self.remote.token(),
                 self.policy,
+                &held(),
             ) {
                 Ok(s) => {
                     self.stream = Some((s, now));
@@ -339,9 +342,21 @@ impl Io {
         lacking: Vec<u32>,
         incomplete: bool,
     ) {
-        if self.stopped || self.pushing(observer) {
+        if self.stopped {
             return;
         }
+        // Listed once at most: for a session that opens, or for the prefetch request.
+        let mut held = Some(held);
+        let mut listed: Option<Vec<u32>> = None;
+        let pushing = self.pushing(observer, || {
+            let v: Vec<u32> = held.take().into_iter().flatten().collect();
+            listed = Some(v.clone());
+            v
+        });
+        if pushing {
+            return;
+        }
+        let held = listed.unwrap_or_else(|| held.take().into_iter().flatten().collect());
         // Every frame: deadlines come nearer as the answer ages.
         self.plan.frame(lacking, incomplete);
         self.refresh(Instant::now());
@@ -351,7 +366,7 @@ impl Io {
         if !self.asking && self.ask_after.is_none_or(|t| Instant::now() >= t) {
             self.asking = true;
             self.ask_after = None;
-            let held: HashSet<u32> = held.chain(self.schedule.pending()).collect();
+            let held: HashSet<u32> = held.into_iter().chain(self.schedule.pending()).collect();
             let number = self.schedule.asked();
             let req = PrefetchRequest {
                 version: PROTOCOL_VERSION,

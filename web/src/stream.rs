@@ -1,4 +1,4 @@
-//! Server push over `/v1/stream` from a page: one WebSocket; `Hello` with the policy when it
+//! Server push over `/v1/db/{database_id}/stream` from a page: one WebSocket; `Hello` with the policy when it
 //! opens, the observer every frame, and the segments the client's cache released as
 //! `Evicted`, so the server's mirror of the cache stays true and nothing is sent twice. The
 //! server pushes segments in need order (Funkhouser §5.2.3) no further than the cache holds.
@@ -34,6 +34,8 @@ pub struct Stream {
     closed: Rc<RefCell<Option<String>>>,
     /// Whether it closed because the server serves another database now.
     stale: Rc<Cell<bool>>,
+    /// Segments the cache released before the session opened: sent right after `Holding`.
+    evicted_early: Rc<RefCell<Vec<u32>>>,
     _callbacks: Vec<Closure<dyn FnMut(JsValue)>>,
 }
 
@@ -63,7 +65,8 @@ fn url(base: &str, db: Option<&str>) -> Result<String, String> {
 
 impl Stream {
     /// Opens a session with the server at `base` on database `db`; `Hello` goes as soon as it
-    /// opens.
+    /// opens, then `Holding` with what the cache holds (`holding`: a session opened again after
+    /// one ended), so the server does not push it again.
     /// `token`: the server's `--token`, given as `?token=` (a browser cannot set headers on a
     /// WebSocket).
     pub fn open(
@@ -71,6 +74,7 @@ impl Stream {
         db: Option<&str>,
         token: Option<&str>,
         policy: Policy,
+        holding: &[u32],
     ) -> Result<Stream, String> {
         // Messages name `url`; only the socket gets the token.
         let url = url(base, db)?;
@@ -89,10 +93,17 @@ impl Stream {
         let closed = Rc::new(RefCell::new(None));
         let mut callbacks = Vec::new();
 
-        let (o, socket) = (open.clone(), ws.clone());
+        let evicted_early = Rc::new(RefCell::new(Vec::new()));
+        let (o, socket, early) = (open.clone(), ws.clone(), evicted_early.clone());
         // The handshake took a TCP and an HTTP round trip: half of it is the round trip the
         // server counts its push deadlines with.
         let opened = js_sys::Date::now();
+        let holding = (!holding.is_empty())
+            .then(|| {
+                let deltas = portico_protocol::encode_held(holding.iter().copied());
+                portico_protocol::to_bincode(&StreamClient::Holding(deltas)).ok()
+            })
+            .flatten();
         let on_open = Closure::<dyn FnMut(JsValue)>::new(move |_| {
             let rtt_ms = ((js_sys::Date::now() - opened) / 2.0).clamp(0.0, 10_000.0) as u32;
             let hello = portico_protocol::to_bincode(&StreamClient::Hello {
@@ -101,7 +112,16 @@ impl Stream {
                 rate_bytes_per_s: u64::MAX / 2,
                 rtt_ms,
             });
-            o.set(hello.is_ok_and(|h| socket.send_with_u8_array(&h).is_ok()));
+            let sent = hello.is_ok_and(|h| socket.send_with_u8_array(&h).is_ok());
+            if sent && let Some(h) = &holding {
+                let _ = socket.send_with_u8_array(h);
+            }
+            let early = std::mem::take(&mut *early.borrow_mut());
+            if sent && !early.is_empty() {
+                let evicted = portico_protocol::to_bincode(&StreamClient::Evicted(early));
+                let _ = evicted.map(|e| socket.send_with_u8_array(&e));
+            }
+            o.set(sent);
         });
         ws.set_onopen(Some(on_open.as_ref().unchecked_ref()));
         callbacks.push(on_open);
@@ -155,6 +175,7 @@ impl Stream {
             open,
             closed,
             stale,
+            evicted_early,
             _callbacks: callbacks,
         })
     }
@@ -208,10 +229,16 @@ impl Stream {
         }
     }
 
-    /// Segments the cache released: the server's mirror forgets them.
+    /// Segments the cache released: the server's mirror forgets them (released before the
+    /// session opened: told right after `Holding`).
     pub fn evicted(&self, ids: Vec<u32>) {
-        if self.is_open() && !ids.is_empty() {
+        if ids.is_empty() {
+            return;
+        }
+        if self.is_open() {
             self.send(&StreamClient::Evicted(ids));
+        } else if self.closed().is_none() {
+            self.evicted_early.borrow_mut().extend(ids);
         }
     }
 }

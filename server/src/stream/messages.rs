@@ -1,14 +1,19 @@
 //! What a stream session does with each client message: decoded by its frame type (binary:
-//! bincode, text: JSON), checked, and applied; a large one is decoded and applied on the
-//! blocking pool so that no client can make an async worker spend milliseconds on it.
+//! bincode, text: JSON), checked, and applied. A large one (at least 16 KB) is decoded, and its
+//! id list applied to the mirror, on the blocking pool, at most one per core at a time across
+//! all sessions (`AppState::heavy`), so that no client can make an async worker, or the pool,
+//! spend long on it.
 
-use super::{End, HEAVY_BYTES, Session, control};
+use super::{End, HEAVY_BYTES, Session, control, secs};
 use crate::error::Error;
 use axum::extract::ws::Message;
 use portico_data::prefetch::shared::encode_policy;
 use portico_protocol::{MAX_LACKING, PROTOCOL_VERSION, StreamClient, StreamServer};
 use std::collections::HashSet;
 use tokio::time::Instant;
+
+/// The least a client frame is charged against [`super::INBOUND_RATE`] (bytes).
+const MIN_CHARGE: usize = 256;
 
 /// A decoded client message, or why it does not decode (named by its parser).
 type Decoded = Result<StreamClient, String>;
@@ -25,6 +30,15 @@ fn decode(bytes: &[u8], text: bool) -> Decoded {
 impl Session {
     /// Handles one client message; returns a control reply, or why the session ends.
     pub(super) async fn on_message(&mut self, msg: Message) -> Result<Option<Message>, End> {
+        // Every frame is charged, at least MIN_CHARGE bytes: a flood of tiny ones (pings
+        // included, which tungstenite answers) costs its loop turns too.
+        let len = match &msg {
+            Message::Binary(b) => b.len(),
+            Message::Text(t) => t.len(),
+            Message::Ping(b) | Message::Pong(b) => b.len(),
+            Message::Close(_) => 0,
+        };
+        self.took(len.max(MIN_CHARGE));
         let (bytes, text) = match msg {
             Message::Binary(b) => (b, false),
             Message::Text(t) => (
@@ -34,9 +48,9 @@ impl Session {
             Message::Close(_) => return Err(End::Gone),
             Message::Ping(_) | Message::Pong(_) => return Ok(None),
         };
-        self.took(bytes.len());
         let heavy = bytes.len() >= HEAVY_BYTES;
         let decoded = if heavy {
+            let _turn = self.state.heavy.acquire().await;
             tokio::task::spawn_blocking(move || decode(&bytes, text))
                 .await
                 .unwrap_or_else(|e| Err(format!("message decoding failed: {e}")))
@@ -63,17 +77,24 @@ impl Session {
                     self.policy_bytes = encode_policy(&policy);
                     self.generation += 1; // what is being computed is for the old policy
                     self.place = None; // the next observer gets the new policy's list
-                    if let Some(p) = &mut self.pending {
-                        p.generation = self.generation; // not started: it will use the new one
+                    // Not started: it will use the new policy, and the place that one gives.
+                    if let Some(mut p) = self.pending.take() {
+                        p.generation = self.generation;
+                        p.place = self.place_of(&p.obs);
+                        self.want = p.place;
+                        self.pending = Some(p);
                     }
                 }
-                self.rate = rate_bytes_per_s.clamp(1, self.state.config.max_session_rate.max(1));
-                self.rtt_s = f64::from(rtt_ms.min(10_000)) / 1e3;
-                // The pacing clock restarts at the new rate: time a slower rate charged is
-                // not owed at this one.
+                let rate = rate_bytes_per_s.clamp(1, self.state.config.max_session_rate.max(1));
+                // What the pacing clock still owes was charged at the old rate: owed at the new
+                // one, it is the same bytes (a zero rate's hours become milliseconds; a Hello
+                // cannot wipe what is owed and so get past the cap).
                 let now = Instant::now();
-                self.next_free = now;
+                let owed = self.next_free.saturating_duration_since(now).as_secs_f64();
+                self.next_free = now + secs(owed * self.rate as f64 / rate as f64);
                 self.recheck = now;
+                self.rate = rate;
+                self.rtt_s = f64::from(rtt_ms.min(10_000)) / 1e3;
                 Ok(None)
             }
             Ok(StreamClient::Observer(obs)) => {
@@ -153,6 +174,7 @@ impl Session {
         };
         let mirror = std::mem::take(&mut self.mirror);
         let (mirror, needed) = if heavy {
+            let _turn = self.state.heavy.acquire().await;
             match tokio::task::spawn_blocking(move || work(mirror)).await {
                 Ok(done) => done,
                 // Cannot happen short of a panic in a set insert; the mirror is then empty,

@@ -58,7 +58,7 @@ use std::pin::Pin;
 use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
 use tokio::sync::OwnedSemaphorePermit;
-use tokio::time::{Duration, Instant, sleep, sleep_until};
+use tokio::time::{Duration, Instant, sleep_until};
 
 /// How far behind the pacing clock may fall before the time is lost (a push burst's length).
 const PACING_BURST: Duration = Duration::from_millis(10);
@@ -75,6 +75,9 @@ const INBOUND_BURST: Duration = Duration::from_secs(4);
 /// Client messages at least this large are decoded and applied on the blocking pool.
 const HEAVY_BYTES: usize = 16 << 10;
 
+/// How long a closing session waits for the client's close frame.
+const CLOSING: Duration = Duration::from_millis(500);
+
 /// Longest wait a session's clocks may be set to (seconds): a pacing or recheck time computed
 /// from a client's numbers never overflows the clock.
 const MAX_WAIT_S: f64 = 3600.0;
@@ -86,9 +89,9 @@ pub async fn upgrade(State(s): State<Arc<AppState>>, ws: WebSocketUpgrade) -> Re
 }
 
 /// `GET /v1/db/{database_id}/stream`: a session over the database the client's manifest
-/// describes. Another database id gets the upgrade and at once a close with
-/// [`CLOSE_STALE`] naming the database served now (a browser sees no HTTP status on a
-/// WebSocket, only the close).
+/// describes. Another database id gets the upgrade and at once a close with [`CLOSE_STALE`]
+/// saying that database is no longer served (a browser sees no HTTP status on a WebSocket,
+/// only the close).
 pub async fn upgrade_in(
     State(s): State<Arc<AppState>>,
     Path(db): Path<String>,
@@ -98,15 +101,28 @@ pub async fn upgrade_in(
         return open(s, ws);
     }
     s.metrics.stream_stale.fetch_add(1, Relaxed);
-    // A close reason is at most 123 bytes: the ids are 32 hex digits, a hostile one is cut.
-    let shown: String = db.chars().take(32).collect();
+    // A close reason is at most 123 bytes: an id is 32 hex digits; anything else is not
+    // echoed.
+    let hex = db.len() <= 32 && db.bytes().all(|b| b.is_ascii_hexdigit());
+    let shown = if hex { db.as_str() } else { "named" };
     let reason = format!("database {shown} is no longer served; read /v1/manifest again");
     ws.on_upgrade(move |mut socket| async move {
         let close = Message::Close(Some(CloseFrame {
             code: CLOSE_STALE,
             reason: reason.into(),
         }));
-        let _ = tokio::time::timeout(Duration::from_secs(1), socket.send(close)).await;
+        if let Ok(Ok(())) = tokio::time::timeout(Duration::from_secs(1), socket.send(close)).await {
+            // The closing handshake: read what the client sent (its Hello, an observer) up to
+            // its close, so the socket does not end in a reset that could lose ours.
+            let _ = tokio::time::timeout(CLOSING, async {
+                while let Some(Ok(m)) = socket.next().await {
+                    if matches!(m, Message::Close(_)) {
+                        break;
+                    }
+                }
+            })
+            .await;
+        }
     })
 }
 
@@ -299,7 +315,8 @@ impl Session {
             recheck: now,
             pending: None,
             compute_after: now,
-            inbound_free: now,
+            // A new session starts with its whole burst (a reopened one's Holding list).
+            inbound_free: now.checked_sub(INBOUND_BURST).unwrap_or(now),
             paged: false,
             pages_sent: HashSet::new(),
             after_page: None,
@@ -314,7 +331,6 @@ impl Session {
             return;
         }
         let idle = self.state.config.idle_timeout;
-        let write_timeout = self.state.config.write_timeout;
         let mut idle_deadline = Instant::now() + idle;
         let mut computing: Option<(Computing, Pending, Instant)> = None;
         let end = loop {
@@ -353,13 +369,16 @@ impl Session {
                 _ = sleep_until(push_at.unwrap_or(idle_deadline)), if push_at.is_some() => {
                     self.next_push()
                 }
-                _ = sleep_until(idle_deadline) => break End::Idle,
+                // Not while the server itself holds back the client's messages.
+                _ = sleep_until(idle_deadline.max(self.inbound_free)) => break End::Idle,
                 _ = shutdown.changed() => break End::Shutdown,
             };
             let Some(message) = outgoing else { continue };
+            // A client that takes nothing for the write timeout fails the send (the
+            // connection's own timeout, `crate::timed`, counts from the last byte it took, so a
+            // large segment to a slow but reading client is not cut off).
             let sent = tokio::select! {
                 r = tx.send(message) => r.is_ok(),
-                _ = sleep(write_timeout) => false,
                 _ = shutdown.changed() => break End::Shutdown,
             };
             if !sent {
@@ -370,7 +389,21 @@ impl Session {
         drop(computing);
         if let Some(frame) = end.frame() {
             let close = tx.send(Message::Close(Some(frame)));
-            let _ = tokio::time::timeout(Duration::from_millis(100), close).await;
+            if tokio::time::timeout(Duration::from_millis(100), close)
+                .await
+                .is_ok_and(|r| r.is_ok())
+            {
+                // The closing handshake: what the client sent meanwhile is read, so the socket
+                // does not end in a reset that could lose the close frame.
+                let _ = tokio::time::timeout(CLOSING, async {
+                    while let Some(Ok(m)) = rx.next().await {
+                        if matches!(m, Message::Close(_)) {
+                            break;
+                        }
+                    }
+                })
+                .await;
+            }
         }
     }
 
@@ -391,4 +424,35 @@ fn control(msg: &StreamServer) -> Message {
     let mut frame = vec![FRAME_CONTROL];
     frame.extend(portico_protocol::to_bincode(msg).unwrap_or_default());
     Message::Binary(frame.into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn waits_from_client_numbers_stay_on_the_clock() {
+        assert_eq!(secs(f64::NAN), Duration::ZERO);
+        assert_eq!(secs(-1.0), Duration::ZERO);
+        assert_eq!(secs(1e30), Duration::from_secs_f64(MAX_WAIT_S));
+        assert_eq!(secs(f64::INFINITY), Duration::from_secs_f64(MAX_WAIT_S));
+        assert_eq!(secs(0.25), Duration::from_millis(250));
+        // The furthest wait still fits the clock.
+        let _ = Instant::now() + secs(1e300);
+    }
+
+    #[test]
+    fn every_end_but_a_lost_connection_closes_with_a_code() {
+        let codes: Vec<_> = [
+            End::Idle,
+            End::Shutdown,
+            End::TooBig,
+            End::Protocol("x".into()),
+        ]
+        .iter()
+        .map(|e| e.frame().expect("a close frame").code)
+        .collect();
+        assert_eq!(codes, [1000, 1001, 1009, 1002]);
+        assert!(End::Gone.frame().is_none() && End::Slow.frame().is_none());
+    }
 }

@@ -73,17 +73,20 @@ impl Session {
 
     /// A new observer: nothing to do while it stays in its place; the cached list of a place
     /// another session computed; otherwise a computation (only the latest observer waits).
+    /// The shared place of `obs` under the session's policy (`None`: its list is its own).
+    pub(super) fn place_of(&self, obs: &Observer) -> Option<SharePlace> {
+        // A predicted lookahead depends on the observer's motion: no two observers share it.
+        let shared = self.state.config.shared_answers && !self.deadlines();
+        shared
+            .then(|| self.state.prefetcher.share_place(obs))
+            .flatten()
+    }
+
     pub(super) fn on_observer(&mut self, obs: Observer) -> Option<Message> {
         let arrived = Instant::now();
         let m = &self.state.metrics;
         m.stream_updates.fetch_add(1, Relaxed);
-        // A predicted lookahead depends on the observer's motion: no two observers share it.
-        let shared = self.state.config.shared_answers && !self.deadlines();
-        let place = if shared {
-            self.state.prefetcher.share_place(&obs)
-        } else {
-            None
-        };
+        let place = self.place_of(&obs);
         self.want = place;
         // A replaced observer's wait counts in the one that replaces it.
         let (arrived, updates) = match self.pending.take() {
@@ -129,7 +132,6 @@ impl Session {
 
     /// A computation finished: its list is taken unless it is stale (another place is wanted
     /// now, or the policy changed); past its deadline the previous list stays.
-    /// A computation past its deadline makes the session wait as long before its next one.
     pub(super) fn on_computed(
         &mut self,
         list: Result<Arc<NeedList>, Error>,
@@ -139,13 +141,19 @@ impl Session {
         self.state
             .metrics
             .update(p.arrived.elapsed().as_secs_f64(), p.updates);
+        // A computation that took half the deadline or more (a wide list, pages made to the
+        // budget, or stopped past it) makes the session wait as long before its next: one
+        // session takes at most about half a compute slot.
+        let took = started.elapsed();
+        if took * 2 >= self.state.config.compute_deadline {
+            self.compute_after = Instant::now() + took;
+        }
         let stale = p.generation != self.generation || (p.place.is_some() && p.place != self.want);
         match list {
             Ok(_) if stale => None,
             Ok(l) => self.take_list(l, p.place, p.at),
             Err(e) if e.status() == StatusCode::SERVICE_UNAVAILABLE => {
                 self.state.metrics.stream_overdue.fetch_add(1, Relaxed);
-                self.compute_after = Instant::now() + started.elapsed();
                 None
             }
             Err(e) => Some(control(&StreamServer::Error(e.to_api()))),
