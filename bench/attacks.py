@@ -11,7 +11,7 @@ Attacks (each for --seconds, one after the other):
   reload        a slow reader of a large batch, then SIGHUP to --pid
   wide-paged    2 paged WebSocket sessions with the wide policy move every 50 ms while a normal
                 client asks for prefetch answers (their statuses reported)
-  huge-frame    a Hello whose frame_time_s is 1e19, an observer, then leaves (open sessions
+  huge-frame    a Hello of the wide policy whose frame_time_s is 1e20, an observer, then leaves (open sessions
                 that /metrics still counts afterwards reported)
   zero-rate     a Hello at 0 bytes/s, an observer, then a Hello at full rate (segments pushed
                 in the 2 s after it reported)
@@ -31,6 +31,10 @@ from urllib.parse import urlparse
 OBS = {"eye": [3.0, 1.5, 3.0], "dir": [1.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0],
        "velocity": [0.0, 0.0, 0.0], "half_fov_x": 0.6, "half_fov_y": 0.45,
        "max_speed": 1.5, "max_turn": 1.0}
+DEFAULT = {"depth_frames": 16, "frame_time_s": 0.05, "range_cull": "direction",
+           "lookahead_cull": "predicted", "granularity": "object", "size_threshold_px": 16.0,
+           "screen": [640, 480], "read_bytes": 4 << 20, "cache_bytes": 64 << 20,
+           "impostors": False}
 WIDE = {"depth_frames": 10000, "frame_time_s": 0.05, "range_cull": "any",
         "lookahead_cull": "any", "granularity": "cell", "size_threshold_px": 0.0,
         "screen": [640, 480], "read_bytes": 1 << 30, "cache_bytes": 1 << 30,
@@ -206,13 +210,13 @@ def metric(host, port, name):
 
 def huge_frame(host, port, seconds):
     s = ws_connect(host, port)
-    s.sendall(ws_text(hello(dict(WIDE, frame_time_s=1e19), rate=1 << 20)))
+    s.sendall(ws_text(hello(dict(WIDE, frame_time_s=1e20))))
     s.sendall(ws_text(json.dumps({"Observer": OBS})))
-    time.sleep(1.0)
+    time.sleep(3.0)
     s.close()
     time.sleep(seconds)
     print(f"  stream sessions /metrics counts after the client left: "
-          f"{metric(host, port, 'portico_stream_sessions'):.0f}")
+          f"{metric(host, port, 'portico_sessions'):.0f}")
 
 
 def segments_within(s, seconds):

@@ -7,8 +7,10 @@
 //! load balancer or cache. No global lock on the hot path: the database is read-only, decoded
 //! stab lists sit in `OnceLock`s, and metrics are atomics. Hostile or unlucky clients are
 //! bounded everywhere: CPU work runs on compute slots with a deadline ([`compute`]), connections
-//! are capped and must send their headers in time ([`listen`]), stream sessions compute only
-//! their latest observer and time out writes ([`stream`]), and every error is JSON ([`guard`]).
+//! are capped and must send their headers in time ([`listen`]) and take their answers in time
+//! ([`timed`]), stream sessions compute only their latest observer and name their database
+//! ([`stream`]), static files hold no descriptor ([`viewer`]), and every error is JSON
+//! ([`guard`]).
 
 pub mod compute;
 pub mod conditional;

@@ -13,24 +13,28 @@
 //! round trip and the margin, and what is queued is the push clock's backlog at the session's
 //! rate. What is not due yet stays in the list for the next push, or for the next list.
 //!
-//! Under Funkhouser's range lookahead answers are shared and incremental: the need list depends only on the eye cell and a
-//! direction bucket (`portico_data::prefetch::shared`), so an observer that stays in its cell
+//! Under Funkhouser's range lookahead answers are shared and incremental: the need list depends
+//! only on the eye cell and a direction bucket (`portico_data::prefetch::shared`), so an observer that stays in its cell
 //! and bucket costs a k-D descent and nothing else, a new place whose list some session already
 //! computed costs a cache lookup, and only a new place nobody has asked for is computed. What
 //! is left to push is the list past a cursor, minus the mirror: no per-session copy of it.
 //! A database without cells falls back to one computation per observer.
 //!
-//! A session cannot take more than its share: observers are coalesced (only the latest one is
-//! computed, on a compute slot within the prefetch deadline, never on the async workers, so a
-//! flood of messages costs one computation at a time); every send races the write timeout and
-//! the shutdown signal (a client that never reads loses its slot, and a stop or reload ends the
-//! session whatever the client does); a silent client is closed after the idle timeout; Hello,
-//! observers and eviction notices are checked, every number before it reaches time arithmetic
-//! ([`crate::routes::validate_policy`]); what a client sends is read at most at
-//! [`INBOUND_RATE`], and a large message is decoded and applied on the blocking pool, never on
-//! an async worker; a computation past its deadline makes the session wait as long before its
-//! next one, and one whose session ended is cancelled. A session that ends for any reason, a
-//! panic included, releases its slot.
+//! A session cannot take more than its share:
+//! - observers are coalesced: only the latest one is computed, on a compute slot within the
+//!   prefetch deadline, never on the async workers, so a flood of messages costs one
+//!   computation at a time; a computation of half the deadline or more makes the session wait
+//!   as long before its next (at most about half a slot each), and one whose session ended is
+//!   cancelled; one update makes at most [`PAGES_PER_UPDATE`] pages;
+//! - every send races the shutdown signal, and the connection's write timeout
+//!   ([`crate::timed`]) fails a send the client takes nothing of: a client that never reads
+//!   loses its slot, and a stop or reload ends the session whatever the client does;
+//! - a silent client is closed after the idle timeout;
+//! - Hello, observers and id lists are checked, every number before it reaches time arithmetic
+//!   ([`crate::routes::validate_policy`], and every wait clamped);
+//! - what a client sends is read at most at [`INBOUND_RATE`], and a large message is decoded
+//!   and applied on the blocking pool, never on an async worker;
+//! - a session that ends for any reason, a panic included, releases its slot.
 //!
 //! The URL names the database the client's manifest describes: a session opened on another
 //! (the file was rebuilt and reloaded between the client's manifest and its stream) is closed
