@@ -111,7 +111,8 @@ struct Generation {
     graceful: GracefulShutdown,
     tasks: JoinSet<()>,
     /// Connections in the order they were accepted, with whether they have sent a whole
-    /// request head yet and since when their writes are stuck (pruned as they end).
+    /// request head yet and since when their writes are stuck (ended ones pruned when they
+    /// are most of it, and at each shedding).
     waiting: VecDeque<(AbortHandle, Arc<AtomicBool>, Stall)>,
 }
 
@@ -261,8 +262,13 @@ pub async fn run(
                     let _ = watcher.watch(conn).await;
                 });
                 current.waiting.push_back((task, started, stall));
-                // Reap finished connection tasks so the set does not grow.
+                // Reap finished connection tasks so the set does not grow, and their entries in
+                // `waiting` once they are most of it (amortised: each entry is looked at a
+                // bounded number of times).
                 while current.tasks.try_join_next().is_some() {}
+                if current.waiting.len() > 2 * current.tasks.len() + 64 {
+                    current.waiting.retain(|(task, ..)| !task.is_finished());
+                }
             }
             c = control.recv() => {
                 match c {
