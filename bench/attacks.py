@@ -270,21 +270,14 @@ def stale(host, port, seconds):
 
 
 def never_reading(host, port, seconds, request, count):
-    held = []
-    for _ in range(count):
-        try:
-            s = socket.socket()
-            s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-            s.settimeout(5)
-            s.connect((host, port))
-            s.sendall(request)
-            held.append(s)
-        except OSError as e:
-            print("  never-reading client:", e)
-            break
-    print(f"  {len(held)} requests sent, never read")
-    time.sleep(seconds)
-    return held
+    def one():
+        s = socket.socket()
+        s.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+        s.settimeout(5)
+        s.connect((host, port))
+        s.sendall(request)
+        return s
+    return hold_open(count, one, "request", seconds)
 
 
 def range416(host, port, seconds):
@@ -340,20 +333,28 @@ def flood(host, port, seconds):
     time.sleep(seconds)
 
 
-def never_read(host, port, seconds):
+def hold_open(count, open_one, what, seconds):
+    """Opens up to `count` connections with `open_one()` that then never read; keeps them for
+    `seconds` and returns them."""
     held = []
-    for _ in range(200):
+    for _ in range(count):
         try:
-            s = ws_connect(host, port, rcvbuf=4096)
-            s.sendall(ws_text(hello()))
-            s.sendall(ws_text(json.dumps({"Observer": OBS})))
-            held.append(s)
+            held.append(open_one())
         except OSError as e:
-            print("  never-read client:", e)
+            print(f"  {what}:", e)
             break
-    print(f"  {len(held)} sessions open, never read")
+    print(f"  {len(held)} {what}s, never read")
     time.sleep(seconds)
     return held
+
+
+def never_read(host, port, seconds):
+    def one():
+        s = ws_connect(host, port, rcvbuf=4096)
+        s.sendall(ws_text(hello()))
+        s.sendall(ws_text(json.dumps({"Observer": OBS})))
+        return s
+    return hold_open(200, one, "stream session", seconds)
 
 
 def slow_headers(host, port, seconds):

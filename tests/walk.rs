@@ -449,21 +449,8 @@ fn a_rebuild_and_reload_mid_walk_sends_no_segment_of_the_new_file() {
     )
     .unwrap();
     assert_ne!(old.database_id, new.database_id);
-    let (control, rx) = tokio::sync::mpsc::unbounded_channel();
-    let (up_tx, up_rx) = std::sync::mpsc::channel();
-    let serving = old.clone();
-    std::thread::spawn(move || {
-        let rt = tokio::runtime::Runtime::new().unwrap();
-        rt.block_on(async move {
-            let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
-            up_tx.send(l.local_addr().unwrap()).unwrap();
-            portico_server::listen::run(l, serving, rx, |_, _| {})
-                .await
-                .unwrap();
-        });
-    });
-    let addr = up_rx.recv().unwrap();
-    let mut cfg = config(format!("http://{addr}"), dir.path().join("walk"), 64 << 20);
+    let (url, control) = common::serve_controlled(old.clone());
+    let mut cfg = config(url, dir.path().join("walk"), 64 << 20);
     cfg.max_frames = Some(120);
     let next = new.clone();
     let s = walk(&cfg, &mut |done, _| {

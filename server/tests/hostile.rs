@@ -6,7 +6,7 @@
 //! The attacks share two cores with the server, so the tests run one at a time.
 
 use futures_util::SinkExt;
-use portico_protocol::{PROTOCOL_VERSION, Policy, StreamClient};
+use portico_protocol::{PROTOCOL_VERSION, StreamClient};
 use portico_server::Config;
 use std::io::{Read, Write};
 use std::time::{Duration, Instant};
@@ -25,19 +25,9 @@ fn bincode(msg: &StreamClient) -> Message {
 
 /// A session that wants the whole building, as fast as the server sends.
 fn hello() -> StreamClient {
-    use portico_protocol::{Granularity, LookaheadCull, RangeCull};
     StreamClient::Hello {
         version: PROTOCOL_VERSION,
-        policy: Policy {
-            depth_frames: 10_000,
-            range_cull: RangeCull::Any,
-            lookahead_cull: LookaheadCull::Any,
-            granularity: Granularity::Cell,
-            size_threshold_px: 0.0,
-            read_bytes: 1 << 30,
-            cache_bytes: 1 << 30,
-            ..Policy::default()
-        },
+        policy: common::wide_policy(),
         rate_bytes_per_s: u64::MAX,
         rtt_ms: 0,
     }

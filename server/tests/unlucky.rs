@@ -5,9 +5,7 @@
 //! pages, `If-Range`, close codes, parser errors).
 
 use futures_util::{SinkExt, StreamExt};
-use portico_protocol::{
-    CLOSE_STALE, Granularity, LookaheadCull, PROTOCOL_VERSION, Policy, RangeCull, StreamClient,
-};
+use portico_protocol::{CLOSE_STALE, PROTOCOL_VERSION, Policy, StreamClient};
 use portico_server::Config;
 use std::io::{Read, Write};
 use std::sync::atomic::Ordering::Relaxed;
@@ -16,7 +14,7 @@ use tokio_tungstenite::tungstenite::Message;
 
 mod common;
 use common::attack::under_attack;
-use common::{big_db_path, observer, request, start, start_on};
+use common::{big_db_path, observer, request, start, start_on, wide_policy as wide};
 
 /// One attack at a time (they share two cores with the server).
 static SERIAL: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
@@ -31,20 +29,6 @@ fn bincode(msg: &StreamClient) -> Message {
 async fn connect(base: &str, path: &str) -> Ws {
     let url = base.replace("http://", "ws://") + path;
     tokio_tungstenite::connect_async(&url).await.unwrap().0
-}
-
-/// A policy that wants the whole building.
-fn wide() -> Policy {
-    Policy {
-        depth_frames: 10_000,
-        range_cull: RangeCull::Any,
-        lookahead_cull: LookaheadCull::Any,
-        granularity: Granularity::Cell,
-        size_threshold_px: 0.0,
-        read_bytes: 1 << 30,
-        cache_bytes: 1 << 30,
-        ..Policy::default()
-    }
 }
 
 fn hello(policy: Policy, rate: u64) -> StreamClient {
@@ -381,13 +365,10 @@ fn descriptors() -> usize {
 
 /// A viewer folder with an 8 MB module (more than socket buffers hold) and its gzip.
 fn viewer(dir: &std::path::Path) {
-    std::fs::write(dir.join("index.html"), "<!doctype html><title>P</title>").unwrap();
-    std::fs::write(dir.join("portico_web.js"), "export default 1").unwrap();
     let module: Vec<u8> = (0..8u32 << 20)
         .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
         .collect();
-    std::fs::write(dir.join("portico_web_bg.wasm"), module).unwrap();
-    std::fs::write(dir.join("portico_web_bg.wasm.gz"), b"gzipped module").unwrap();
+    common::viewer_folder(dir, &module);
 }
 
 /// Faults 5 and 6: each viewer answer held a file descriptor the connection cap did not count,

@@ -7,20 +7,9 @@ use portico_server::Config;
 mod common;
 use common::start;
 
-/// A stand-in viewer folder: the page, the glue, the module and a gzipped module.
+/// A stand-in viewer folder with a small module.
 fn viewer(dir: &std::path::Path) {
-    std::fs::write(
-        dir.join("index.html"),
-        "<!doctype html><title>Portico</title>",
-    )
-    .unwrap();
-    std::fs::write(
-        dir.join("portico_web.js"),
-        "export default function init() {}",
-    )
-    .unwrap();
-    std::fs::write(dir.join("portico_web_bg.wasm"), b"\0asm plain module").unwrap();
-    std::fs::write(dir.join("portico_web_bg.wasm.gz"), b"gzipped module").unwrap();
+    common::viewer_folder(dir, b"\0asm plain module");
 }
 
 #[tokio::test]

@@ -40,20 +40,48 @@ pub fn serve_tiny(dir: &Path) -> (String, Arc<AppState>, PathBuf) {
 /// Serves a database on a background runtime; returns the base URL and the server's state.
 pub fn serve_db(db: &Path) -> (String, Arc<AppState>) {
     let state = AppState::open(db, Config::default()).unwrap();
-    let (tx, rx) = std::sync::mpsc::channel();
     let s = state.clone();
+    let url = in_background(move |l| async move {
+        portico_server::serve(s, l, std::future::pending())
+            .await
+            .unwrap();
+    });
+    (url, state)
+}
+
+/// Serves `state` on a background runtime with the accept loop's own controls (reload, stop);
+/// returns the base URL and the control sender.
+pub fn serve_controlled(
+    state: Arc<AppState>,
+) -> (
+    String,
+    tokio::sync::mpsc::UnboundedSender<portico_server::listen::Control>,
+) {
+    let (control, rx) = tokio::sync::mpsc::unbounded_channel();
+    let url = in_background(move |l| async move {
+        portico_server::listen::run(l, state, rx, |_, _| {})
+            .await
+            .unwrap();
+    });
+    (url, control)
+}
+
+/// Runs `serve` on a listener on a free loopback port, on a runtime of its own thread; returns
+/// the base URL once it listens.
+fn in_background<F: std::future::Future<Output = ()>>(
+    serve: impl FnOnce(tokio::net::TcpListener) -> F + Send + 'static,
+) -> String {
+    let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         let rt = tokio::runtime::Runtime::new().unwrap();
         rt.block_on(async move {
             let l = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
             tx.send(format!("http://{}", l.local_addr().unwrap()))
                 .unwrap();
-            portico_server::serve(s, l, std::future::pending())
-                .await
-                .unwrap();
+            serve(l).await;
         });
     });
-    (rx.recv().unwrap(), state)
+    rx.recv().unwrap()
 }
 
 /// Runs the `portico` binary with `args`.

@@ -107,6 +107,38 @@ pub fn observer(db: &Database) -> Observer {
     }
 }
 
+/// A policy that wants the whole building (every cell, every object, every byte).
+pub fn wide_policy() -> Policy {
+    use portico_protocol::{Granularity, LookaheadCull, RangeCull};
+    Policy {
+        depth_frames: 10_000,
+        range_cull: RangeCull::Any,
+        lookahead_cull: LookaheadCull::Any,
+        granularity: Granularity::Cell,
+        size_threshold_px: 0.0,
+        read_bytes: 1 << 30,
+        cache_bytes: 1 << 30,
+        ..Policy::default()
+    }
+}
+
+/// A stand-in viewer folder: the page, the glue, `module` as the wasm module, and a gzipped
+/// module beside it.
+pub fn viewer_folder(dir: &std::path::Path, module: &[u8]) {
+    std::fs::write(
+        dir.join("index.html"),
+        "<!doctype html><title>Portico</title>",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("portico_web.js"),
+        "export default function init() {}",
+    )
+    .unwrap();
+    std::fs::write(dir.join("portico_web_bg.wasm"), module).unwrap();
+    std::fs::write(dir.join("portico_web_bg.wasm.gz"), b"gzipped module").unwrap();
+}
+
 pub fn request(db: &Database) -> PrefetchRequest {
     PrefetchRequest {
         version: PROTOCOL_VERSION,
