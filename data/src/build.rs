@@ -104,6 +104,7 @@ pub fn build_with(
         defs,
         instances,
         sources,
+        frames,
         origin,
         warnings: _,
         spaces,
@@ -190,6 +191,7 @@ pub fn build_with(
     let header = Header {
         name,
         sources,
+        frames,
         flattened: opts.flatten,
         bounds,
         origin,

@@ -19,7 +19,10 @@ pub mod cells;
 pub mod codec;
 pub mod deadline;
 pub mod error;
+#[cfg(feature = "native")]
+pub mod export;
 pub mod format;
+pub mod frame;
 pub mod geometry;
 pub mod hierarchy;
 #[cfg(feature = "native")]

@@ -87,6 +87,9 @@ pub struct Model {
     pub instances: Vec<Instance>,
     /// The files it came from.
     pub sources: Vec<String>,
+    /// Each source's unit and up axis, in the order of `sources` (the importers converted the
+    /// model from it to metres, Y up).
+    pub frames: Vec<crate::frame::SourceFrame>,
     /// World position (metres, double precision) of the model's local origin: every coordinate
     /// in the model is relative to it. Zero unless the source sits far from its own origin
     /// (survey coordinates), see [`crate::bulk::local_origin`].
@@ -129,6 +132,7 @@ impl Model {
                 i
             }));
         self.sources.extend(other.sources);
+        self.frames.extend(other.frames);
         self.warnings.extend(other.warnings);
         let shift = shift.as_mat4();
         self.spaces.extend(other.spaces.into_iter().map(|mut s| {

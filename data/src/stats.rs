@@ -61,9 +61,11 @@ pub struct DbStats {
     pub file_bytes: u64,
     /// Bounds (min, max) in metres, relative to `origin`.
     pub bounds: [[f32; 3]; 2],
-    /// The local origin in the source's coordinates (metres): add it to place the model back in
-    /// the world (survey coordinates); zero for models built near their own origin.
+    /// The local origin (metres, Y up): add it to place the model back in the world (survey
+    /// coordinates); zero for models built near their own origin.
     pub origin: [f64; 3],
+    /// Each source file with its unit and up axis ([`crate::frame`]), converted from at import.
+    pub frames: Vec<(String, crate::frame::SourceFrame)>,
     /// Leaf cells (0 without cells).
     pub cells: u64,
     /// Portals.
@@ -191,6 +193,12 @@ pub fn stats(db: &Database) -> DbStats {
         file_bytes: db.file_len(),
         bounds: [h.bounds.min, h.bounds.max],
         origin: h.origin,
+        frames: h
+            .sources
+            .iter()
+            .cloned()
+            .zip(h.frames.iter().cloned())
+            .collect(),
         cells: h.cells.as_ref().map_or(0, |c| c.stats.cells),
         portals: h.cells.as_ref().map_or(0, |c| c.stats.portals),
         cell_stats: h.cells.as_ref().map(|c| c.stats.clone()),
@@ -251,9 +259,15 @@ impl DbStats {
         if self.origin != [0.0; 3] {
             let o = self.origin;
             s.push_str(&format!(
-                " from the local origin ({:.3}, {:.3}, {:.3}) in the source's coordinates",
+                " from the local origin ({:.3}, {:.3}, {:.3}) (metres, Y up)",
                 o[0], o[1], o[2]
             ));
+        }
+        for (source, frame) in &self.frames {
+            let file = std::path::Path::new(source)
+                .file_name()
+                .map_or(source.clone(), |f| f.to_string_lossy().into_owned());
+            s.push_str(&format!("\n  {file}: {}", frame.describe()));
         }
         s.push_str("\n\n");
         s.push_str(&format!(

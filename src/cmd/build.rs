@@ -1,10 +1,14 @@
-//! `portico build MODEL... -o FILE.portico [--flatten] [--compress] [--threads N]`
+//! `portico build MODEL... -o FILE.portico [--units UNIT] [--up AXIS] [--flatten] [--compress]
+//! [--threads N]`
 
+use crate::cmd::values;
 use crate::progress::Bars;
 use anyhow::{Context, Result};
 use portico_data::build::{BuildOptions, build_with};
+use portico_data::frame::{LengthUnit, UpAxis};
 use portico_data::hierarchy::ImpostorPainter;
-use portico_data::import::import_file;
+use portico_data::import::frame::FrameOptions;
+use portico_data::import::import_file_with;
 use portico_render::impostor::Painter;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -23,6 +27,14 @@ pub struct Args {
         value_name = "FILE"
     )]
     output: PathBuf,
+    /// The unit the models' coordinates are in, whatever their geometry or format says
+    /// (default: the format's, or found from the geometry for OBJ).
+    #[arg(long, value_name = "UNIT", value_parser = values::unit())]
+    units: Option<LengthUnit>,
+    /// The axis pointing up in the models (default: the format's, or found from the geometry
+    /// for OBJ).
+    #[arg(long, value_name = "AXIS", value_parser = values::up())]
+    up: Option<UpAxis>,
     /// Store every instance's geometry separately with baked lighting (large: the out-of-core case).
     #[arg(long)]
     flatten: bool,
@@ -58,10 +70,17 @@ pub fn run(a: Args) -> Result<()> {
     }
     let t0 = Instant::now();
     let mut model = portico_data::model::Model::default();
+    let options = FrameOptions {
+        units: a.units,
+        up: a.up,
+    };
     for path in &a.models {
-        let m = import_file(path)?;
+        let m = import_file_with(path, &options)?;
         for w in &m.warnings {
             eprintln!("warning: {}: {w}", path.display());
+        }
+        for f in &m.frames {
+            eprintln!("{}: {}", path.display(), f.describe());
         }
         model.merge(m);
     }
@@ -97,7 +116,7 @@ pub fn run(a: Args) -> Result<()> {
     );
     if origin != [0.0; 3] {
         eprintln!(
-            "local origin: ({:.3}, {:.3}, {:.3}) m in the source's coordinates (kept in the database)",
+            "local origin: ({:.3}, {:.3}, {:.3}) m, Y up (kept in the database)",
             origin[0], origin[1], origin[2]
         );
     }

@@ -1,8 +1,10 @@
 //! `portico generate --preset tiny|small|soda|mega [--seed N] [--floors F] [--untagged] [--textured] -o building.glb`
+//! (or `-o building.obj [--units UNIT] [--up AXIS]`: OBJ as SketchUp or Revit write it)
 
 use crate::cmd::values;
 use crate::progress::Bars;
 use anyhow::{Context, Result};
+use portico_data::frame::{LengthUnit, SourceFrame, UpAxis};
 use portico_generator::{Params, Preset, generate};
 use std::io::Write;
 use std::path::PathBuf;
@@ -28,7 +30,14 @@ pub struct Args {
     /// tile PNGs in the GLB, box-mapped coordinates), to measure streaming with textures.
     #[arg(long)]
     textured: bool,
-    /// Output GLB file.
+    /// With an `.obj` output: the unit to write it in (default m).
+    #[arg(long, value_name = "UNIT", value_parser = values::unit())]
+    units: Option<LengthUnit>,
+    /// With an `.obj` output: the axis to write pointing up (default y).
+    #[arg(long, value_name = "AXIS", value_parser = values::up())]
+    up: Option<UpAxis>,
+    /// Output file: `.glb`, or `.obj` (with its `.mtl`; untagged, without textures), in the
+    /// unit and up axis given, as exporters write OBJ.
     #[arg(
         short = 'o',
         long = "out",
@@ -64,12 +73,32 @@ pub fn run(a: Args) -> Result<()> {
     if a.untagged {
         glb = portico_generator::without_tags(&glb).context("removing the tags")?;
     }
-    write_atomically(&a.output, &glb)?;
+    let obj = a
+        .output
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("obj"));
+    if obj {
+        let model = portico_data::import::gltf::import_slice(&glb, None, &Default::default())
+            .map_err(|e| anyhow::anyhow!("reading the generated building back: {e}"))?;
+        let frame = SourceFrame {
+            unit: a.units.unwrap_or(LengthUnit::Metre),
+            up: a.up.unwrap_or(UpAxis::Y),
+            ..SourceFrame::metres_y_up()
+        };
+        portico_data::export::write_obj(&model, &frame, &a.output)?;
+    } else {
+        if a.units.is_some() || a.up.is_some() {
+            anyhow::bail!(
+                "--units and --up apply to an .obj output; a GLB is metres and Y up by its specification"
+            );
+        }
+        write_atomically(&a.output, &glb)?;
+    }
     let s = &building.stats;
     eprintln!(
         "wrote {} ({:.1} MB) in {:.2} s: {} storeys, {} rooms, {} instances of {} definitions, {} triangles at the highest LOD",
         a.output.display(),
-        glb.len() as f64 / 1e6,
+        std::fs::metadata(&a.output).map_or(0, |m| m.len()) as f64 / 1e6,
         t0.elapsed().as_secs_f64(),
         s.storeys,
         s.rooms,

@@ -3,6 +3,7 @@
 
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use portico_client::elision::Algorithm;
+use portico_data::frame::{LengthUnit, UpAxis};
 use portico_generator::Preset;
 
 /// Image size of every command that renders (`walk`, `bench`, `demo`).
@@ -19,6 +20,23 @@ pub fn preset() -> impl TypedValueParser<Value = Preset> {
         PossibleValue::new("mega").help("18 storeys, 3,571 rooms: 10x Soda Hall"),
     ])
     .map(|s| s.parse().expect("every listed preset parses"))
+}
+
+/// `--units` of `build`: the length units a model file may be in.
+pub fn unit() -> impl TypedValueParser<Value = LengthUnit> {
+    PossibleValuesParser::new(
+        LengthUnit::ALL.map(|u| PossibleValue::new(u.symbol()).help(u.name())),
+    )
+    .map(|s| LengthUnit::parse(&s).expect("every listed unit parses"))
+}
+
+/// `--up` of `build`: the axis pointing up in a model file.
+pub fn up() -> impl TypedValueParser<Value = UpAxis> {
+    PossibleValuesParser::new([
+        PossibleValue::new("y").help("Y up (glTF, most OBJ)"),
+        PossibleValue::new("z").help("Z up (IFC, Revit, 3ds Max, Rhino)"),
+    ])
+    .map(|s| UpAxis::parse(&s).expect("every listed axis parses"))
 }
 
 /// `--elision`: the detail elision algorithms of the client.

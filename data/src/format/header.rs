@@ -14,13 +14,17 @@ pub struct Header {
     pub name: String,
     /// The model files it was built from.
     pub sources: Vec<String>,
+    /// Each source's unit and up axis ([`crate::frame`]), in the order of `sources`: the
+    /// model was converted from it to metres, Y up.
+    pub frames: Vec<crate::frame::SourceFrame>,
     /// Whether instances carry their own baked geometry (`portico build --flatten`).
     pub flattened: bool,
     /// Bounds of the whole model, relative to `origin`.
     pub bounds: Aabb,
-    /// Where the model's local origin lies in the source's coordinates (metres, double
-    /// precision): add it to any position to place the model back in the world (survey
-    /// coordinates). Zero for models built near their own origin.
+    /// Where the model's local origin lies (metres, Y up, double precision): add it to any
+    /// position to place the model back in the world (survey coordinates), then undo the
+    /// source's frame (`frames`) for the file's own numbers. Zero for models built near their
+    /// own origin.
     pub origin: [f64; 3],
     /// Materials (index 0 is the default).
     pub materials: Vec<Material>,

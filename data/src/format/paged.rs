@@ -21,6 +21,7 @@ impl Header {
         Header {
             name: self.name.clone(),
             sources: self.sources.clone(),
+            frames: self.frames.clone(),
             flattened: self.flattened,
             bounds: self.bounds,
             origin: self.origin,

@@ -7,6 +7,7 @@
 //! Neither can panic on a file: bad input is one error line naming the file and the element
 //! (mesh, primitive, accessor, node, or OBJ line).
 
+pub mod frame;
 pub mod gltf;
 pub mod ifc;
 pub mod image;
@@ -15,11 +16,19 @@ pub mod obj;
 use crate::error::{DataError, Result};
 use crate::geometry::{Mesh, Vertex};
 use crate::model::Model;
+use frame::FrameOptions;
 use glam::Vec3;
 use std::path::Path;
 
-/// Imports one model file; the format is taken from the extension (`.obj`, `.gltf`, `.glb`).
+/// Imports one model file; the format is taken from the extension (`.obj`, `.gltf`, `.glb`,
+/// `.ifc`). Its unit and up axis are the format's, or found from the geometry (OBJ).
 pub fn import_file(path: &Path) -> Result<Model> {
+    import_file_with(path, &FrameOptions::default())
+}
+
+/// [`import_file`] with the unit and up axis the user gave (`portico build --units --up`):
+/// the model is converted from them to metres, Y up.
+pub fn import_file_with(path: &Path, options: &FrameOptions) -> Result<Model> {
     if !path.exists() {
         return Err(DataError::import(path, "no such file"));
     }
@@ -29,9 +38,9 @@ pub fn import_file(path: &Path) -> Result<Model> {
         .map(str::to_ascii_lowercase)
         .unwrap_or_default();
     let mut model = match ext.as_str() {
-        "obj" => obj::import(path)?,
-        "gltf" | "glb" => gltf::import(path)?,
-        "ifc" => ifc::import(path)?,
+        "obj" => obj::import(path, options)?,
+        "gltf" | "glb" => gltf::import(path, options)?,
+        "ifc" => ifc::import(path, options)?,
         other => {
             return Err(DataError::import(
                 path,
@@ -49,10 +58,11 @@ pub fn import_file(path: &Path) -> Result<Model> {
 /// Imports model bytes without touching the file system (no external buffers or material
 /// libraries): `ext` is `obj`, `gltf` or `glb`. For fuzzing and tests.
 pub fn import_bytes(bytes: &[u8], ext: &str) -> std::result::Result<Model, String> {
+    let options = FrameOptions::default();
     let model = match ext {
-        "obj" => obj::import_slice(bytes, None),
-        "gltf" | "glb" => gltf::import_slice(bytes, None),
-        "ifc" => ifc::import_slice(bytes),
+        "obj" => obj::import_slice(bytes, None, &options),
+        "gltf" | "glb" => gltf::import_slice(bytes, None, &options),
+        "ifc" => ifc::import_slice(bytes, &options),
         other => Err(format!("unsupported model format '.{other}'")),
     }?;
     if model.instances.is_empty() {

@@ -26,8 +26,10 @@ mod material;
 mod primitive;
 
 use super::concat;
+use super::frame::{self, FrameOptions, Piece, pieces_of};
 use crate::bulk::{DBox, MAX_COORDINATE, bulk, local_origin};
 use crate::error::{DataError, Result};
+use crate::frame::SourceFrame;
 use crate::geometry::Mesh;
 use crate::model::{Instance, Model, ObjectDef};
 use ::gltf::json;
@@ -51,14 +53,20 @@ const DECODED: &[&str] = &[
 
 /// Imports a `.gltf` (with external or embedded buffers) or `.glb` file. Errors name the file
 /// and the element at fault.
-pub fn import(path: &Path) -> Result<Model> {
+pub fn import(path: &Path, options: &FrameOptions) -> Result<Model> {
     let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
-    import_slice(&bytes, path.parent()).map_err(|e| DataError::import(path, e))
+    import_slice(&bytes, path.parent(), options).map_err(|e| DataError::import(path, e))
 }
 
 /// Imports glTF or GLB bytes; external buffers are read from `base` (refused when `None`).
-/// The error is one line naming the element at fault (without the file name).
-pub fn import_slice(bytes: &[u8], base: Option<&Path>) -> Result<Model, String> {
+/// The error is one line naming the element at fault (without the file name). glTF is metres
+/// and Y up by its specification: the frame `options` give is applied, and a model whose
+/// geometry clearly says otherwise gets a warning naming the options ([`frame::settle`]).
+pub fn import_slice(
+    bytes: &[u8],
+    base: Option<&Path>,
+    options: &FrameOptions,
+) -> Result<Model, String> {
     if bytes.starts_with(b"glTF") && bytes.get(4..8) == Some(&1u32.to_le_bytes()[..]) {
         return Err(
             "binary glTF 1.0 is not supported (only glTF 2.0); convert it, e.g. with Blender"
@@ -102,6 +110,7 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>) -> Result<Model, String> 
         model: Model::default(),
         defs: HashMap::new(),
         uv: mats.uv,
+        options: *options,
     };
     imp.model.materials = mats.materials;
     imp.model.textures = mats.textures;
@@ -200,6 +209,8 @@ struct Importer<'a> {
     defs: HashMap<(usize, Vec<usize>, Vec<u32>), Vec<u32>>,
     /// Per glTF material, how its texture maps coordinates (`None`: untextured).
     uv: Vec<Option<material::UvMap>>,
+    /// The unit and up axis the user gave.
+    options: FrameOptions,
 }
 
 impl Importer<'_> {
@@ -511,8 +522,23 @@ impl Importer<'_> {
             .collect())
     }
 
-    /// Moves the instances to the model's local origin and names the strays.
-    fn place(&mut self, placed: Vec<Placed>, warnings: &mut Vec<String>) -> Result<(), String> {
+    /// Settles the frame (converting the instances to it), moves them to the model's local
+    /// origin and names the strays.
+    fn place(&mut self, mut placed: Vec<Placed>, warnings: &mut Vec<String>) -> Result<(), String> {
+        let (frame, said) = frame::settle(
+            &self.pieces(&placed),
+            &SourceFrame::metres_y_up(),
+            false,
+            &self.options,
+        );
+        warnings.extend(said);
+        if !frame.is_identity() {
+            let to_metres = frame.to_metres_y_up();
+            placed
+                .iter_mut()
+                .for_each(|p| p.world = to_metres * p.world);
+        }
+        self.model.frames.push(frame);
         let mut boxes = Vec::with_capacity(placed.len());
         for p in &placed {
             let local = self.model.defs[p.def as usize].lods[0].bounds();
@@ -580,6 +606,29 @@ impl Importer<'_> {
             });
         }
         Ok(())
+    }
+}
+
+impl Importer<'_> {
+    /// The connected parts of the placed definitions ([`frame::pieces_of`]), each definition
+    /// cut once; at most [`frame::MAX_SAMPLED`] instances, evenly spread, are placed.
+    fn pieces(&self, placed: &[Placed]) -> Vec<Piece> {
+        let mut own: HashMap<u32, Vec<Piece>> = HashMap::new();
+        let stride = placed.len().div_ceil(frame::MAX_SAMPLED).max(1);
+        let mut out = Vec::new();
+        for p in placed.iter().step_by(stride) {
+            let parts = own.entry(p.def).or_insert_with(|| {
+                let mesh = &self.model.defs[p.def as usize].lods[0];
+                let positions: Vec<DVec3> = mesh
+                    .vertices
+                    .iter()
+                    .map(|v| Vec3::from(v.position).as_dvec3())
+                    .collect();
+                pieces_of(&positions, &mesh.indices, &DMat4::IDENTITY)
+            });
+            out.extend(parts.iter().map(|q| q.placed(&p.world)));
+        }
+        out
     }
 }
 

@@ -1,31 +1,43 @@
 //! IFC (2x3, 4, 4x3) import through the IFClite stack: `ifc-lite-core` parses the STEP file,
 //! `ifc-lite-geometry` meshes each product's body representation, openings subtracted.
 //!
-//! Every product with a shape (walls, slabs, doors, windows, stairs, furniture, ...) becomes
-//! one definition with one instance, tagged with what the building model knows of it:
+//! Only what a product's shape shows is drawn ([`representations`]: `Body`, never a door's
+//! `Clearance`). Every product with a shape (walls, slabs, doors, windows, stairs, furniture,
+//! ...) becomes one instance; occurrences of one shape (`IfcMappedItem`s of one representation
+//! map, or identical solids) share one definition ([`instancing`]). Each instance is tagged
+//! with what the building model knows of it:
 //! `ifc_class` (`IfcWallStandardCase`), `storey` (the `IfcBuildingStorey`'s name), `name` and
 //! `guid`. Walls and slabs are the occluders (`occluder`, as the generator's walls and floors
 //! are): their own data says they are structure, so no size heuristic guesses it. Opening
 //! elements are not drawn (they are the holes), and spaces (`IfcSpace`, the rooms) are not
 //! drawn either: their boxes come back in [`Model::spaces`] for the cell subdivision.
 //!
-//! IFC is Z-up; Portico (like glTF) is Y-up: `(x, y, z)` becomes `(x, z, −y)`. Colours come
+//! IFC is Z-up; Portico (like glTF) is Y-up: `(x, y, z)` becomes `(x, z, −y)`. Lengths come
+//! in the file's declared unit (`IfcUnitAssignment`), converted to metres by the kernel; the
+//! user's `--units` and `--up` override both, and a model whose geometry clearly disagrees with
+//! its declared unit gets a warning ([`crate::import::frame`]). Products whose parts carry the
+//! shape (assemblies, a roof of slabs) are not reported as lacking one. Colours come
 //! from the items' surface styles, else the product's material, else a colour per class;
 //! IFC colours are sRGB and are converted to linear. Coordinates are read in f64 and moved to
 //! the model's local origin ([`crate::bulk::local_origin`]), so georeferenced files keep their
 //! millimetres. A product that does not mesh is skipped with a warning naming it; a file that
 //! does not parse at all is one error naming the file.
 
+mod instancing;
 mod relations;
+mod representations;
 
+use super::frame::{FrameOptions, Piece, pieces_of, settle};
 use super::mesh_from_streams;
 use crate::bulk::{DBox, MAX_COORDINATE, bulk, local_origin};
 use crate::error::{DataError, Result};
+use crate::frame::{FrameSource, LengthUnit, SourceFrame, UpAxis};
 use crate::geometry::Aabb;
 use crate::model::{Instance, Material, Model, ObjectDef, Space};
-use glam::{DVec3, Mat4};
+use glam::{DMat4, DVec3, Mat4, Vec3};
 use ifc_lite_core::{EntityDecoder, EntityScanner, has_geometry_by_name};
 use ifc_lite_geometry::GeometryRouter;
+use instancing::{Occurrence, Shape, Share};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -56,10 +68,10 @@ const NOT_DRAWN: [&str; 8] = [
 /// Spatial structure that may or may not have a shape of its own.
 const SPATIAL: [&str; 3] = ["IFCSITE", "IFCBUILDING", "IFCBUILDINGSTOREY"];
 
-/// Imports an IFC file.
-pub fn import(path: &Path) -> Result<Model> {
+/// Imports an IFC file, in the unit and up axis `options` give, else the file's.
+pub fn import(path: &Path, options: &FrameOptions) -> Result<Model> {
     let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
-    import_slice(&bytes).map_err(|e| DataError::import(path, e))
+    import_slice(&bytes, options).map_err(|e| DataError::import(path, e))
 }
 
 /// One product's mesh before the model moves to its local origin: Y-up world positions in
@@ -73,13 +85,15 @@ struct Part {
     normals: Vec<[f32; 3]>,
     colours: Vec<[f32; 4]>,
     indices: Vec<u32>,
+    /// Where the kernel says its shape came from, when it can be shared.
+    occurrence: Option<Occurrence>,
 }
 
 /// Imports IFC bytes (a STEP physical file). The error is one line naming what is wrong. A
 /// panic in the IFC kernel is caught: on one product it costs that product (warned), anywhere
 /// else it is the error.
-pub fn import_slice(bytes: &[u8]) -> Result<Model, String> {
-    std::panic::catch_unwind(|| import_unguarded(bytes)).unwrap_or_else(|p| {
+pub fn import_slice(bytes: &[u8], options: &FrameOptions) -> Result<Model, String> {
+    std::panic::catch_unwind(|| import_unguarded(bytes, options)).unwrap_or_else(|p| {
         Err(format!(
             "the IFC kernel failed on this file: {}",
             panic_text(p.as_ref())
@@ -95,12 +109,13 @@ fn panic_text(p: &(dyn std::any::Any + Send)) -> String {
         .unwrap_or_else(|| "panic".into())
 }
 
-fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
+fn import_unguarded(bytes: &[u8], options: &FrameOptions) -> Result<Model, String> {
     if !bytes.starts_with(b"ISO-10303-21") {
         return Err("not an IFC file: it does not start with ISO-10303-21".into());
     }
     let content = String::from_utf8_lossy(bytes);
-    let content: &str = &content;
+    let body = representations::body_only(&content);
+    let content: &str = &body.content;
     let rel = relations::scan(content);
     let mut decoder = EntityDecoder::new(content);
     let router = GeometryRouter::with_units(&content, &mut decoder);
@@ -136,8 +151,12 @@ fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
         .unwrap_or_else(|p| Err(panic_text(p.as_ref())));
         match meshed {
             Ok(Some(p)) => parts.push(p),
-            // A site or building without a shape of its own is normal.
-            Ok(None) if SPATIAL.contains(&ty.as_str()) => {}
+            // A site or building without a shape of its own is normal, and so is a product
+            // whose parts carry its shape or whose shape only describes it (a clearance).
+            Ok(None)
+                if SPATIAL.contains(&ty.as_str())
+                    || rel.wholes.contains(id)
+                    || body.shapeless.contains(id) => {}
             Ok(None) => empty.push(format!("#{id} {ty}")),
             Err(e) => failed.push(format!("#{id} {ty}: {e}")),
         }
@@ -167,6 +186,14 @@ fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
                 .join("; ")
         ));
     }
+    let (frame, kernel_to_model) =
+        settle_frame(&mut parts, router.unit_scale(), options, &mut warnings);
+    if body.left_out > 0 {
+        tracing::debug!(
+            "{} representation(s) that describe rather than show (clearances, axes, boxes) left out",
+            body.left_out
+        );
+    }
     let boxes: Vec<DBox> = parts
         .iter()
         .map(|p| {
@@ -189,27 +216,49 @@ fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
     let mut model = Model {
         materials: vec![Material::default()],
         origin: origin.to_array(),
+        frames: vec![frame],
         ..Model::default()
     };
-    for p in parts {
-        let positions: Vec<[f32; 3]> = p
-            .positions
+    let shares = instancing::share(
+        &parts
             .iter()
-            .map(|q| (*q - origin).as_vec3().to_array())
-            .collect();
-        let lod = mesh_from_streams(&positions, Some(&p.normals), &p.colours, p.indices)
-            .map_err(|e| format!("#{} {} '{}': {e}", p.id, p.class, p.name))?;
-        let def = model.defs.len() as u32;
+            .map(|p| Shape {
+                occurrence: p.occurrence.as_ref(),
+                positions: &p.positions,
+                indices: &p.indices,
+                colours: &p.colours,
+            })
+            .collect::<Vec<_>>(),
+        &kernel_to_model,
+    );
+    let to_local = DMat4::from_translation(-origin);
+    let from_local = DMat4::from_translation(origin);
+    let mut def_of = vec![0u32; parts.len()];
+    for (k, (p, share)) in parts.into_iter().zip(shares).enumerate() {
         let label = if p.name.is_empty() {
             format!("{} #{}", p.class, p.id)
         } else {
             p.name.clone()
         };
-        model.defs.push(ObjectDef {
-            name: label.clone(),
-            lods: vec![lod],
-            material: 0,
-        });
+        let (def, transform) = match share {
+            Share::Copy { of, moved } => (def_of[of], (to_local * moved * from_local).as_mat4()),
+            Share::Own => {
+                let positions: Vec<[f32; 3]> = p
+                    .positions
+                    .iter()
+                    .map(|q| (*q - origin).as_vec3().to_array())
+                    .collect();
+                let lod = mesh_from_streams(&positions, Some(&p.normals), &p.colours, p.indices)
+                    .map_err(|e| format!("#{} {} '{}': {e}", p.id, p.class, p.name))?;
+                model.defs.push(ObjectDef {
+                    name: label.clone(),
+                    lods: vec![lod],
+                    material: 0,
+                });
+                (model.defs.len() as u32 - 1, Mat4::IDENTITY)
+            }
+        };
+        def_of[k] = def;
         let mut tags = BTreeMap::new();
         tags.insert("ifc_class".to_string(), p.class.clone());
         tags.insert("guid".to_string(), p.guid);
@@ -222,22 +271,26 @@ fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
         model.instances.push(Instance {
             name: label,
             def,
-            transform: Mat4::IDENTITY,
+            transform,
             material: 0,
             occluder: OCCLUDER_CLASSES.contains(&p.class.to_ascii_uppercase().as_str()),
             tags,
         });
     }
+    let kernel_y_up = UpAxis::Z.to_y_up();
+    let space_frame = kernel_to_model * kernel_y_up.inverse();
     for id in spaces {
         match space_box(id, &router, &mut decoder) {
             Ok(Some((name, b))) => {
+                let b = Aabb {
+                    min: b.min.as_vec3().to_array(),
+                    max: b.max.as_vec3().to_array(),
+                };
+                let moved = (to_local * space_frame).as_mat4();
                 model.spaces.push(Space {
                     name,
                     storey: rel.storey_name(id),
-                    bounds: Aabb {
-                        min: (b.min - origin).as_vec3().to_array(),
-                        max: (b.max - origin).as_vec3().to_array(),
-                    },
+                    bounds: b.transformed(&moved),
                 });
             }
             Ok(None) => {}
@@ -251,6 +304,59 @@ fn import_unguarded(bytes: &[u8]) -> Result<Model, String> {
 /// IFC's Z-up to Portico's Y-up.
 fn y_up(x: f64, y: f64, z: f64) -> DVec3 {
     DVec3::new(x, z, -y)
+}
+
+/// Settles the file's frame: its declared unit (`unit_scale` metres per unit, applied by the
+/// kernel) and Z up, unless the user gave others; a model whose geometry clearly says
+/// otherwise gets a warning. Moves the parts (meshed in metres of the declared unit and turned
+/// Y up) to the frame settled, and returns it with the change from the kernel's frame (Z up,
+/// declared metres) to the model's.
+fn settle_frame(
+    parts: &mut [Part],
+    unit_scale: f64,
+    options: &FrameOptions,
+    warnings: &mut Vec<String>,
+) -> (SourceFrame, DMat4) {
+    let declared = LengthUnit::of_metres(unit_scale);
+    let file = SourceFrame {
+        unit: declared.unwrap_or(LengthUnit::Metre),
+        unit_source: FrameSource::Format,
+        unit_why: match declared {
+            Some(_) => "the file's IfcUnitAssignment".into(),
+            None => format!("the file's IfcUnitAssignment: {unit_scale} m, read as such"),
+        },
+        up: UpAxis::Z,
+        up_source: FrameSource::Format,
+        up_why: "IFC".into(),
+    };
+    // The geometry in the file's own numbers, for the evidence.
+    let to_file = (UpAxis::Z.to_y_up() * DMat4::from_scale(DVec3::splat(unit_scale))).inverse();
+    let mut pieces: Vec<Piece> = Vec::new();
+    let stride = parts.len().div_ceil(super::frame::MAX_SAMPLED).max(1);
+    for p in parts.iter().step_by(stride) {
+        pieces.extend(pieces_of(&p.positions, &p.indices, &to_file));
+    }
+    let (frame, said) = settle(&pieces, &file, false, options);
+    warnings.extend(said);
+    let kernel_y_up = UpAxis::Z.to_y_up();
+    if frame.unit == file.unit && frame.up == file.up {
+        return (frame, kernel_y_up);
+    }
+    // From the kernel's frame (declared metres, Z up) back to the file's numbers, then on to
+    // metres and Y up as the user says.
+    let kernel_to_file = DMat4::from_scale(DVec3::splat(1.0 / unit_scale));
+    let kernel_to_model = frame.to_metres_y_up() * kernel_to_file;
+    let fix = kernel_to_model * kernel_y_up.inverse();
+    let turn = fix.to_scale_rotation_translation().1;
+    for p in parts.iter_mut() {
+        p.positions
+            .iter_mut()
+            .for_each(|q| *q = fix.transform_point3(*q));
+        p.normals
+            .iter_mut()
+            .for_each(|n| *n = (turn * Vec3::from(*n).as_dvec3()).as_vec3().to_array());
+    }
+    (frame, kernel_to_model)
 }
 
 /// Meshes one product (openings subtracted) into a [`Part`]; `None` when it has no triangles.
@@ -290,9 +396,19 @@ fn mesh_product(
         normals: Vec::new(),
         colours: Vec::new(),
         indices: Vec::new(),
+        occurrence: None,
     };
+    let mut shapes = Vec::new();
+    let mut placement = None;
     for sub in subs.iter() {
         let m = &sub.mesh;
+        match m.instance_meta.as_ref().filter(|meta| meta.instanceable) {
+            Some(meta) => {
+                shapes.push(meta.rep_identity);
+                placement.get_or_insert_with(|| placement_of(meta));
+            }
+            None => shapes.push(0),
+        }
         let colour = rel
             .item_colour
             .get(&sub.geometry_id)
@@ -322,7 +438,26 @@ fn mesh_product(
             "a vertex is not a finite number or lies beyond ±{MAX_COORDINATE:.0e} m"
         ));
     }
+    if !shapes.contains(&0)
+        && let Some(placement) = placement
+    {
+        part.occurrence = Some(Occurrence { shapes, placement });
+    }
     Ok((!part.indices.is_empty()).then_some(part))
+}
+
+/// The kernel's placement of an instanceable mesh (`transform · local · canonical`, written
+/// row-major) as a matrix.
+fn placement_of(meta: &ifc_lite_geometry::InstanceMeta) -> DMat4 {
+    let m = |a: &[f64; 16]| DMat4::from_cols_array(a).transpose();
+    let mut p = m(&meta.transform);
+    if let Some(l) = &meta.local_transform {
+        p *= m(l);
+    }
+    if let Some(c) = &meta.canonical_transform {
+        p *= m(c);
+    }
+    p
 }
 
 /// A space's name (`LongName`, else `Name`) and its Y-up world box.

@@ -31,6 +31,9 @@ pub struct Relations {
     pub material_colour: FxHashMap<u32, [f32; 4]>,
     /// Product → its material (or the first layer's material of a layer set).
     pub material_of: FxHashMap<u32, u32>,
+    /// Products made of parts (`IfcRelAggregates`, `IfcRelNests`: an `IfcElementAssembly`,
+    /// a roof of slabs, a stair of flights): their parts carry the shape.
+    pub wholes: rustc_hash::FxHashSet<u32>,
 }
 
 impl Relations {
@@ -51,11 +54,14 @@ pub fn scan(content: &str) -> Relations {
     let mut associations: Vec<(u32, Vec<u32>)> = Vec::new();
     let mut memo = StyleMemo::default();
     while let Some((id, ty, start, end)) = scanner.next_entity() {
+        // STEP keywords are case-insensitive.
+        let ty = ty.to_ascii_uppercase();
         let wanted = matches!(
-            ty,
+            ty.as_str(),
             "IFCRELVOIDSELEMENT"
                 | "IFCRELCONTAINEDINSPATIALSTRUCTURE"
                 | "IFCRELAGGREGATES"
+                | "IFCRELNESTS"
                 | "IFCBUILDINGSTOREY"
                 | "IFCSTYLEDITEM"
                 | "IFCMATERIALDEFINITIONREPRESENTATION"
@@ -67,7 +73,7 @@ pub fn scan(content: &str) -> Relations {
         let Ok(e) = decoder.decode_at_with_id(id, start, end) else {
             continue;
         };
-        match ty {
+        match ty.as_str() {
             "IFCRELVOIDSELEMENT" => {
                 if let (Some(host), Some(opening)) = (e.get_ref(4), e.get_ref(5)) {
                     rel.voids.entry(host).or_default().push(opening);
@@ -80,7 +86,13 @@ pub fn scan(content: &str) -> Relations {
             }
             "IFCRELAGGREGATES" => {
                 if let (Some(whole), Some(parts)) = (e.get_ref(4), e.get_refs(5)) {
+                    rel.wholes.insert(whole);
                     contained.push((whole, parts));
+                }
+            }
+            "IFCRELNESTS" => {
+                if let Some(whole) = e.get_ref(4) {
+                    rel.wholes.insert(whole);
                 }
             }
             "IFCBUILDINGSTOREY" => {

@@ -12,25 +12,33 @@
 
 pub mod text;
 
+use super::frame::{FrameOptions, Piece, pieces_of, settle};
 use super::mesh_from_streams;
 use crate::bulk::{DBox, bulk, local_origin};
 use crate::error::{DataError, Result};
+use crate::frame::SourceFrame;
 use crate::import::image::decode;
 use crate::model::{Instance, Material, Model, ObjectDef};
 use crate::texture::{AlphaMode, Wrap};
-use glam::{DVec3, Mat4};
+use glam::{DMat4, DVec3, Mat4};
 use std::io::{BufRead, Read};
 use std::path::Path;
 
-/// Imports an OBJ file (and its MTL library when it loads; a missing MTL only loses colours).
-pub fn import(path: &Path) -> Result<Model> {
+/// Imports an OBJ file (and its MTL library when it loads; a missing MTL only loses colours),
+/// in the unit and up axis `options` give or the geometry shows ([`crate::import::frame`]).
+pub fn import(path: &Path, options: &FrameOptions) -> Result<Model> {
     let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
-    import_slice(&bytes, path.parent()).map_err(|e| DataError::import(path, e))
+    import_slice(&bytes, path.parent(), options).map_err(|e| DataError::import(path, e))
 }
 
 /// Imports OBJ bytes; material libraries are read from `base` (none when `None`). The error is
-/// one line naming the source line at fault.
-pub fn import_slice(bytes: &[u8], base: Option<&Path>) -> Result<Model, String> {
+/// one line naming the source line at fault. OBJ says nothing of its unit or up axis: both
+/// come from `options` or from the geometry, and the model is converted to metres, Y up.
+pub fn import_slice(
+    bytes: &[u8],
+    base: Option<&Path>,
+    options: &FrameOptions,
+) -> Result<Model, String> {
     let (src, encoding) = text::decode(bytes);
     let norm = text::obj(&src)?;
     let mut warnings = Vec::new();
@@ -97,19 +105,45 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>) -> Result<Model, String> 
             },
         });
     }
-    // Positions in f64: the bulk and its origin first, then everything relative to it.
+    // Positions in f64: the unit and up axis first, then the bulk and its origin in metres,
+    // then everything relative to it.
     let objects: Vec<&tobj::Model> = models
         .iter()
         .filter(|m| !m.mesh.indices.is_empty())
         .collect();
-    let boxes: Vec<DBox> = objects
+    let source: Vec<Vec<DVec3>> = objects
         .iter()
         .map(|m| {
-            let mut b = DBox::EMPTY;
             m.mesh
                 .positions
                 .chunks_exact(3)
-                .for_each(|c| b.include(DVec3::new(c[0], c[1], c[2])));
+                .map(|c| DVec3::new(c[0], c[1], c[2]))
+                .collect()
+        })
+        .collect();
+    let pieces: Vec<Piece> = objects
+        .iter()
+        .zip(&source)
+        .flat_map(|(m, p)| pieces_of(p, &m.mesh.indices, &DMat4::IDENTITY))
+        .collect();
+    let (frame, frame_warnings) = settle(&pieces, &SourceFrame::metres_y_up(), true, options);
+    warnings.extend(frame_warnings);
+    let to_metres = frame.to_metres_y_up();
+    let turn = frame.up.to_y_up();
+    let world: Vec<Vec<DVec3>> = source
+        .into_iter()
+        .map(|p| {
+            p.into_iter()
+                .map(|q| to_metres.transform_point3(q))
+                .collect()
+        })
+        .collect();
+    model.frames.push(frame);
+    let boxes: Vec<DBox> = world
+        .iter()
+        .map(|p| {
+            let mut b = DBox::EMPTY;
+            p.iter().for_each(|q| b.include(*q));
             b
         })
         .collect();
@@ -123,22 +157,25 @@ pub fn import_slice(bytes: &[u8], base: Option<&Path>) -> Result<Model, String> 
     }
     let origin = local_origin(&bulk.bounds);
     model.origin = origin.to_array();
-    for m in objects {
+    for (m, world) in objects.into_iter().zip(&world) {
         let mesh = &m.mesh;
         let material = mesh.material_id.map_or(0, |i| i as u32 + 1);
         let base = model
             .materials
             .get(material as usize)
             .map_or([1.0; 4], |mat| mat.base_color);
-        let positions: Vec<[f32; 3]> = mesh
-            .positions
-            .chunks_exact(3)
-            .map(|c| [c[0] - origin.x, c[1] - origin.y, c[2] - origin.z].map(|x| x as f32))
+        let positions: Vec<[f32; 3]> = world
+            .iter()
+            .map(|p| (*p - origin).as_vec3().to_array())
             .collect();
         let normals: Vec<[f32; 3]> = mesh
             .normals
             .chunks_exact(3)
-            .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
+            .map(|c| {
+                turn.transform_vector3(DVec3::new(c[0], c[1], c[2]))
+                    .as_vec3()
+                    .to_array()
+            })
             .collect();
         let colors: Vec<[f32; 4]> = if mesh.vertex_color.len() == mesh.positions.len() {
             mesh.vertex_color

@@ -1,0 +1,559 @@
+//! Finding a model file's unit and up axis from its geometry ([`crate::frame`]).
+//!
+//! The model is cut into pieces: the connected parts of every object's triangles (vertices
+//! joined where their positions are equal), so an OBJ that groups a whole building by material
+//! still shows its walls, slabs, columns and chairs one by one. Then:
+//!
+//! - **Up**: things rest on floors. Along the axis that points up, the pieces' lowest points
+//!   gather on a few levels (every wall, column and chair of a storey starts on its floor);
+//!   along a horizontal axis they spread over every room's wall line and every chair's place.
+//!   The concentration of the pieces' lowest points (the sum of the squared shares of each
+//!   level, a Herfindahl index) is compared between Y and Z; one must beat the other by
+//!   [`UP_MARGIN`].
+//! - **Unit**: with the up axis known, walls are the thin pieces standing on edge (their
+//!   thinnest side horizontal, under a third of their next side) and slabs the thin pieces
+//!   lying flat. The walls' heights (the storey, 2.3–4 m), the thin pieces' thicknesses
+//!   (5–50 cm) and the building's width (3 m–2 km) are read in
+//!   each unit; the unit that puts them where buildings have them wins, and it must win by
+//!   [`UNIT_MARGIN`] to be called found.
+//!
+//! A frame given on the command line is used as given; a guess that is not confident keeps
+//! the format's default and says which option to give.
+
+use crate::bulk::DBox;
+use crate::frame::{FrameSource, LengthUnit, SourceFrame, UpAxis};
+use glam::{DMat4, DVec3};
+use rustc_hash::FxHashMap;
+
+/// How much more concentrated the lowest points must be along one axis than the other for
+/// it to be called up.
+pub const UP_MARGIN: f64 = 1.25;
+
+/// How much better (in log-plausibility: e-folds outside the ranges below) the best unit must
+/// fit than the next. Neighbouring units differ by 2.54× (cm and in) or more, an e-fold of 0.93,
+/// of which the storey range's own width takes 0.55.
+pub const UNIT_MARGIN: f64 = 0.3;
+
+/// Storey heights (metres): the height of a wall piece in a building.
+const STOREY: (f64, f64) = (2.3, 4.0);
+/// Wall and slab thicknesses (metres).
+const THICKNESS: (f64, f64) = (0.05, 0.5);
+/// A building's width (metres).
+const WIDTH: (f64, f64) = (3.0, 2000.0);
+
+/// Instances placed for the evidence at most (evenly spread over a larger model): the cues are
+/// statistics, and a model of millions of instances need not be walked twice.
+pub const MAX_SAMPLED: usize = 50_000;
+
+/// What the user gave on the command line (`portico build --units cm --up z`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FrameOptions {
+    /// The unit the file is in, whatever its geometry says.
+    pub units: Option<LengthUnit>,
+    /// The axis pointing up in the file, whatever its geometry says.
+    pub up: Option<UpAxis>,
+}
+
+/// A connected part of an object: its box and its area, in the file's coordinates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Piece {
+    /// Bounding box.
+    pub bounds: DBox,
+    /// Total triangle area.
+    pub area: f64,
+}
+
+impl Piece {
+    /// The piece moved by `m`: its box's corners placed, its area scaled by `m`'s largest
+    /// axis scale squared.
+    pub fn placed(&self, m: &DMat4) -> Piece {
+        let mut bounds = DBox::EMPTY;
+        for i in 0..8 {
+            let pick = |bit: usize, axis: usize| {
+                if i & bit == 0 {
+                    self.bounds.min[axis]
+                } else {
+                    self.bounds.max[axis]
+                }
+            };
+            bounds.include(m.transform_point3(DVec3::new(pick(1, 0), pick(2, 1), pick(4, 2))));
+        }
+        let s = m.to_scale_rotation_translation().0.abs().max_element();
+        Piece {
+            bounds,
+            area: self.area * s * s,
+        }
+    }
+}
+
+/// The connected parts of one mesh (vertices joined where their positions are equal), placed
+/// by `to_world`. `positions` and `indices` are the mesh's own; bad indices are skipped.
+pub fn pieces_of(positions: &[DVec3], indices: &[u32], to_world: &DMat4) -> Vec<Piece> {
+    let n = positions.len();
+    // Weld by exact position: exporters split vertices along normal and UV seams.
+    let mut weld: FxHashMap<[u64; 3], u32> = FxHashMap::default();
+    let id: Vec<u32> = positions
+        .iter()
+        .map(|p| {
+            let key = p.to_array().map(|x| (x + 0.0).to_bits());
+            let next = weld.len() as u32;
+            *weld.entry(key).or_insert(next)
+        })
+        .collect();
+    let mut parent: Vec<u32> = (0..weld.len() as u32).collect();
+    fn find(parent: &mut [u32], mut x: u32) -> u32 {
+        while parent[x as usize] != x {
+            parent[x as usize] = parent[parent[x as usize] as usize];
+            x = parent[x as usize];
+        }
+        x
+    }
+    let tris: Vec<[usize; 3]> = indices
+        .chunks_exact(3)
+        .map(|t| [t[0] as usize, t[1] as usize, t[2] as usize])
+        .filter(|t| t.iter().all(|&i| i < n))
+        .collect();
+    for t in &tris {
+        let a = find(&mut parent, id[t[0]]);
+        for &v in &t[1..] {
+            let b = find(&mut parent, id[v]);
+            if a != b {
+                parent[b as usize] = a;
+            }
+        }
+    }
+    let mut slot: FxHashMap<u32, usize> = FxHashMap::default();
+    let mut out: Vec<Piece> = Vec::new();
+    for t in &tris {
+        let root = find(&mut parent, id[t[0]]);
+        let k = *slot.entry(root).or_insert_with(|| {
+            out.push(Piece {
+                bounds: DBox::EMPTY,
+                area: 0.0,
+            });
+            out.len() - 1
+        });
+        let [a, b, c] = t.map(|i| to_world.transform_point3(positions[i]));
+        let p = &mut out[k];
+        p.bounds.include(a);
+        p.bounds.include(b);
+        p.bounds.include(c);
+        p.area += 0.5 * (b - a).cross(c - a).length();
+    }
+    out.retain(|p| p.area.is_finite() && !p.bounds.is_empty());
+    out
+}
+
+/// What the geometry says about the frame, before the options and defaults.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Evidence {
+    /// The axis the pieces rest along, if one clearly does.
+    pub up: Option<UpAxis>,
+    /// Concentration of the pieces' lowest points along Y and along Z.
+    pub concentration: [f64; 2],
+    /// The unit that puts the storeys, thicknesses and width where buildings have them, if
+    /// one clearly does (read with `up`, or Y when that is unknown).
+    pub unit: Option<LengthUnit>,
+    /// Why, for reports: wall heights and thicknesses in the file's units.
+    pub unit_why: String,
+}
+
+/// Reads the pieces for their up axis and unit (see the module documentation).
+pub fn evidence(pieces: &[Piece]) -> Evidence {
+    let concentration = [1, 2].map(|axis| resting_concentration(pieces, axis));
+    let up = if concentration[1] > concentration[0] * UP_MARGIN {
+        Some(UpAxis::Z)
+    } else if concentration[0] > concentration[1] * UP_MARGIN {
+        Some(UpAxis::Y)
+    } else {
+        None
+    };
+    let (unit, unit_why) = unit_of(pieces, up.unwrap_or(UpAxis::Y));
+    Evidence {
+        up,
+        concentration,
+        unit,
+        unit_why,
+    }
+}
+
+/// Settles a file's frame: the options first, else the geometry's evidence when `detect`
+/// (OBJ, whose files carry neither), else `default` (what the format says). When the format
+/// fixes the frame (`detect` false), evidence that clearly disagrees comes back as a warning
+/// naming the options to give, and the format's frame is kept.
+pub fn settle(
+    pieces: &[Piece],
+    default: &SourceFrame,
+    detect: bool,
+    options: &FrameOptions,
+) -> (SourceFrame, Vec<String>) {
+    let mut frame = default.clone();
+    let mut warnings = Vec::new();
+    if options.units.is_some() && options.up.is_some() {
+        frame.unit = options.units.unwrap_or(frame.unit);
+        frame.up = options.up.unwrap_or(frame.up);
+        frame.unit_source = FrameSource::Given;
+        frame.up_source = FrameSource::Given;
+        frame.unit_why.clear();
+        frame.up_why.clear();
+        return (frame, warnings);
+    }
+    let ev = evidence(pieces);
+    let up_why = format!(
+        "pieces rest on levels along {}: concentration {:.2} along Y, {:.2} along Z",
+        ev.up.map_or("neither axis clearly", |u| match u {
+            UpAxis::Y => "Y",
+            UpAxis::Z => "Z",
+        }),
+        ev.concentration[0],
+        ev.concentration[1]
+    );
+    match options.up {
+        Some(u) => {
+            frame.up = u;
+            frame.up_source = FrameSource::Given;
+            frame.up_why.clear();
+        }
+        None if detect => match ev.up {
+            Some(u) => {
+                frame.up = u;
+                frame.up_source = FrameSource::Found;
+                frame.up_why = up_why;
+            }
+            None => {
+                frame.up_source = FrameSource::Assumed;
+                frame.up_why = up_why;
+                warnings.push(format!(
+                    "the up axis is not clear from the geometry ({}); assumed {}: give --up y \
+                     or --up z if it is wrong",
+                    frame.up_why,
+                    frame.up.symbol().to_ascii_uppercase()
+                ));
+            }
+        },
+        None => {
+            if let Some(u) = ev.up.filter(|&u| u != frame.up) {
+                warnings.push(format!(
+                    "the format says {} is up, but the model looks {} up ({up_why}): give --up {} \
+                     if it is",
+                    frame.up.symbol().to_ascii_uppercase(),
+                    u.symbol().to_ascii_uppercase(),
+                    u.symbol()
+                ));
+            }
+        }
+    }
+    // The unit read with the up axis settled above.
+    let (unit, unit_why) = if frame.up == ev.up.unwrap_or(UpAxis::Y) {
+        (ev.unit, ev.unit_why.clone())
+    } else {
+        unit_of(pieces, frame.up)
+    };
+    match options.units {
+        Some(u) => {
+            frame.unit = u;
+            frame.unit_source = FrameSource::Given;
+            frame.unit_why.clear();
+        }
+        None if detect => match unit {
+            Some(u) => {
+                frame.unit = u;
+                frame.unit_source = FrameSource::Found;
+                frame.unit_why = unit_why;
+            }
+            None => {
+                frame.unit_source = FrameSource::Assumed;
+                frame.unit_why = unit_why;
+                warnings.push(format!(
+                    "the unit is not clear from the geometry ({}); assumed {}: give --units \
+                     m, cm, mm, in or ft if it is wrong",
+                    frame.unit_why,
+                    frame.unit.name()
+                ));
+            }
+        },
+        None => {
+            if let Some(u) = unit.filter(|&u| u != frame.unit) {
+                warnings.push(format!(
+                    "the file is in {}, but the model looks like {} ({unit_why}): give --units {} \
+                     if it is",
+                    frame.unit.name(),
+                    u.name(),
+                    u.symbol()
+                ));
+            }
+        }
+    }
+    (frame, warnings)
+}
+
+/// The concentration of the pieces' lowest points along `axis`: the sum over levels of the
+/// squared share of pieces starting there (1 when all start on one level). Levels are 0.2 %
+/// of the model's extent along the axis apart.
+fn resting_concentration(pieces: &[Piece], axis: usize) -> f64 {
+    if pieces.is_empty() {
+        return 0.0;
+    }
+    let mut mins: Vec<f64> = pieces.iter().map(|p| p.bounds.min[axis]).collect();
+    mins.sort_by(f64::total_cmp);
+    let lo = mins[0];
+    let hi = pieces
+        .iter()
+        .map(|p| p.bounds.max[axis])
+        .fold(f64::NEG_INFINITY, f64::max);
+    let tol = ((hi - lo) * 0.002).max(f64::MIN_POSITIVE);
+    // Runs of lowest points no further than `tol` from the run's first.
+    let mut sum = 0.0;
+    let mut start = 0;
+    for i in 1..=mins.len() {
+        if i == mins.len() || mins[i] - mins[start] > tol {
+            let share = (i - start) as f64 / mins.len() as f64;
+            sum += share * share;
+            start = i;
+        }
+    }
+    sum
+}
+
+/// The unit that puts the walls' heights, the thin pieces' thicknesses and the building's
+/// width where buildings have them, if one does clearly, and what was measured.
+fn unit_of(pieces: &[Piece], up: UpAxis) -> (Option<LengthUnit>, String) {
+    let up = up.index();
+    let mut heights = Vec::new();
+    let mut thicknesses = Vec::new();
+    for p in pieces {
+        let size = p.bounds.max - p.bounds.min;
+        let mut axes = [0usize, 1, 2];
+        axes.sort_by(|&a, &b| size[a].total_cmp(&size[b]));
+        let (thin, mid) = (size[axes[0]], size[axes[1]]);
+        if mid <= 0.0 || thin > mid / 3.0 {
+            continue;
+        }
+        if thin > 0.0 {
+            thicknesses.push((thin, p.area));
+        }
+        if axes[0] != up && size[up] > 2.0 * thin {
+            heights.push((size[up], p.area));
+        }
+    }
+    let height = weighted_median(&mut heights);
+    let thickness = weighted_median(&mut thicknesses);
+    let width = width_of(pieces, up);
+    let score = |u: LengthUnit| {
+        let m = u.metres();
+        height.map_or(0.0, |h| fit(h * m, STOREY))
+            + thickness.map_or(0.0, |t| fit(t * m, THICKNESS))
+            + width.map_or(0.0, |w| fit(w * m, WIDTH))
+    };
+    let mut ranked: Vec<(LengthUnit, f64)> =
+        LengthUnit::ALL.iter().map(|&u| (u, score(u))).collect();
+    ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let num = |x: Option<f64>| x.map_or("none".to_string(), |v| format!("{}", round3(v)));
+    let why = format!(
+        "wall heights {}, thicknesses {}, width {} in the file's units",
+        num(height),
+        num(thickness),
+        num(width)
+    );
+    let (best, best_score) = ranked[0];
+    let sure = height.is_some() && best_score > -1.5 && ranked[1].1 < best_score - UNIT_MARGIN;
+    (sure.then_some(best), why)
+}
+
+/// Three significant digits.
+fn round3(v: f64) -> f64 {
+    if v == 0.0 || !v.is_finite() {
+        return v;
+    }
+    let p = 10f64.powi(2 - v.abs().log10().floor() as i32);
+    (v * p).round() / p
+}
+
+/// Log-plausibility of `v` for a range: 0 inside, minus the e-folds outside.
+fn fit(v: f64, (lo, hi): (f64, f64)) -> f64 {
+    if v <= 0.0 || !v.is_finite() {
+        -10.0
+    } else if v < lo {
+        -(lo / v).ln()
+    } else if v > hi {
+        -(v / hi).ln()
+    } else {
+        0.0
+    }
+}
+
+/// The area-weighted median of `(value, weight)` pairs.
+fn weighted_median(v: &mut [(f64, f64)]) -> Option<f64> {
+    let total: f64 = v.iter().map(|x| x.1).sum();
+    if v.is_empty() || total <= 0.0 {
+        return None;
+    }
+    v.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut acc = 0.0;
+    for &(value, w) in v.iter() {
+        acc += w;
+        if acc >= total * 0.5 {
+            return Some(value);
+        }
+    }
+    v.last().map(|x| x.0)
+}
+
+/// The building's width: the larger horizontal span of the 10th to 90th percentile of piece
+/// centres (strays far away do not count), at least the median piece's own span.
+fn width_of(pieces: &[Piece], up: usize) -> Option<f64> {
+    if pieces.is_empty() {
+        return None;
+    }
+    let mut best: f64 = 0.0;
+    for axis in (0..3).filter(|&a| a != up) {
+        let mut c: Vec<f64> = pieces.iter().map(|p| p.bounds.center()[axis]).collect();
+        c.sort_by(f64::total_cmp);
+        let last = c.len() - 1;
+        let span = c[(last as f64 * 0.9).ceil() as usize] - c[(last as f64 * 0.1).floor() as usize];
+        let mut own: Vec<f64> = pieces
+            .iter()
+            .map(|p| p.bounds.max[axis] - p.bounds.min[axis])
+            .collect();
+        own.sort_by(f64::total_cmp);
+        best = best.max(span).max(own[own.len() / 2]);
+    }
+    (best > 0.0).then_some(best)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn boxed(min: [f64; 3], max: [f64; 3]) -> Piece {
+        let (min, max) = (DVec3::from(min), DVec3::from(max));
+        let s = max - min;
+        Piece {
+            bounds: DBox { min, max },
+            area: 2.0 * (s.x * s.y + s.y * s.z + s.z * s.x),
+        }
+    }
+
+    /// The two-room house of the import cases (metres, Y up), as boxes.
+    fn house() -> Vec<Piece> {
+        vec![
+            boxed([0.0, -0.2, 0.0], [10.0, 0.0, 8.0]),
+            boxed([0.0, 3.0, 0.0], [10.0, 3.2, 8.0]),
+            boxed([0.0, 0.0, 0.0], [10.0, 3.0, 0.2]),
+            boxed([0.0, 0.0, 7.8], [10.0, 3.0, 8.0]),
+            boxed([0.0, 0.0, 0.2], [0.2, 3.0, 7.8]),
+            boxed([9.8, 0.0, 0.2], [10.0, 3.0, 7.8]),
+            boxed([4.9, 0.0, 0.2], [5.1, 3.0, 3.5]),
+            boxed([4.9, 0.0, 4.5], [5.1, 3.0, 7.8]),
+            boxed([4.9, 2.2, 3.5], [5.1, 3.0, 4.5]),
+            boxed([2.0, 0.0, 3.0], [3.5, 0.8, 4.5]),
+            boxed([7.0, 0.0, 2.0], [7.5, 0.5, 2.5]),
+        ]
+    }
+
+    fn placed(pieces: &[Piece], m: DMat4) -> Vec<Piece> {
+        pieces
+            .iter()
+            .map(|p| {
+                let mut b = DBox::EMPTY;
+                b.include(m.transform_point3(p.bounds.min));
+                b.include(m.transform_point3(p.bounds.max));
+                Piece {
+                    bounds: b,
+                    area: p.area,
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_house_in_every_unit_and_axis_is_found() {
+        for unit in LengthUnit::ALL {
+            for up in [UpAxis::Y, UpAxis::Z] {
+                let frame = SourceFrame {
+                    unit,
+                    up,
+                    ..SourceFrame::metres_y_up()
+                };
+                let pieces = placed(&house(), frame.to_metres_y_up().inverse());
+                let ev = evidence(&pieces);
+                assert_eq!(ev.up, Some(up), "{unit:?} {up:?}: {ev:?}");
+                if unit != LengthUnit::Decimetre {
+                    assert_eq!(ev.unit, Some(unit), "{unit:?} {up:?}: {ev:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn given_options_win_and_an_unclear_guess_warns_naming_the_option() {
+        let given = FrameOptions {
+            units: Some(LengthUnit::Foot),
+            up: Some(UpAxis::Z),
+        };
+        let (f, w) = settle(&house(), &SourceFrame::metres_y_up(), true, &given);
+        assert_eq!(
+            (f.unit, f.up, f.unit_source),
+            (LengthUnit::Foot, UpAxis::Z, FrameSource::Given)
+        );
+        assert!(w.is_empty());
+        // One cube says nothing about storeys: assumed, with the option named.
+        let cube = [boxed([0.0; 3], [1.0; 3])];
+        let (f, w) = settle(
+            &cube,
+            &SourceFrame::metres_y_up(),
+            true,
+            &FrameOptions::default(),
+        );
+        assert_eq!(f.unit_source, FrameSource::Assumed);
+        assert!(w.iter().any(|w| w.contains("--units")), "{w:?}");
+        assert!(w.iter().any(|w| w.contains("--up")), "{w:?}");
+    }
+
+    #[test]
+    fn a_fixed_format_keeps_its_frame_and_warns_when_the_model_disagrees() {
+        let frame = SourceFrame {
+            unit: LengthUnit::Centimetre,
+            up: UpAxis::Z,
+            ..SourceFrame::metres_y_up()
+        };
+        let pieces = placed(&house(), frame.to_metres_y_up().inverse());
+        let (f, w) = settle(
+            &pieces,
+            &SourceFrame::metres_y_up(),
+            false,
+            &FrameOptions::default(),
+        );
+        assert!(f.is_identity());
+        assert!(w.iter().any(|w| w.contains("--up z")), "{w:?}");
+        assert!(w.iter().any(|w| w.contains("--units cm")), "{w:?}");
+        let (_, w) = settle(
+            &house(),
+            &SourceFrame::metres_y_up(),
+            false,
+            &FrameOptions::default(),
+        );
+        assert!(w.is_empty(), "{w:?}");
+    }
+
+    #[test]
+    fn pieces_are_the_connected_parts_joined_where_positions_meet() {
+        // Two triangles sharing an edge by position only (split vertices), and one apart.
+        let p = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [1.0, 1.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [5.0, 0.0, 0.0],
+            [6.0, 0.0, 0.0],
+            [5.0, 1.0, 0.0],
+        ]
+        .map(DVec3::from);
+        let pieces = pieces_of(&p, &[0, 1, 2, 3, 4, 5, 6, 7, 8, 0, 1, 99], &DMat4::IDENTITY);
+        assert_eq!(pieces.len(), 2);
+        assert!((pieces[0].area - 1.0).abs() < 1e-12);
+        assert_eq!(pieces[1].bounds.min.x, 5.0);
+    }
+}
