@@ -31,6 +31,7 @@ pub mod import;
 pub mod lod;
 pub mod model;
 pub mod path;
+pub mod person;
 #[cfg(feature = "native")]
 pub mod prefetch;
 #[cfg(feature = "native")]

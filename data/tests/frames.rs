@@ -12,6 +12,7 @@ use portico_data::import::frame::{FrameOptions, Piece, evidence, pieces_of};
 use portico_data::import::{import_file, import_file_with};
 use portico_data::model::Model;
 use portico_data::path::{CameraPath, PathKind, standard};
+use portico_data::person::{EYE_HEIGHT, TURN_DEGREES, WALK_SPEED};
 use std::path::{Path, PathBuf};
 
 mod common;
@@ -51,7 +52,7 @@ impl Built {
         (c.cells, c.live_cells, c.portals)
     }
 
-    /// The standard tour, as `portico path` makes it (4 legs, seed 1, 1.5 m/s, 1 rad/s).
+    /// The standard tour, as `portico path` makes it (4 legs, seed 1, at a person's pace).
     fn tour(&self) -> CameraPath {
         let graph = self.db.cell_graph().unwrap().expect("cells");
         let objects: Vec<Aabb> = self
@@ -68,8 +69,8 @@ impl Built {
             PathKind::Tour,
             4,
             1,
-            1.5,
-            1.0,
+            WALK_SPEED,
+            TURN_DEGREES.to_radians(),
         )
         .unwrap()
     }
@@ -131,7 +132,9 @@ fn the_house_in_centimetres_or_z_up_walks_like_the_house_in_metres() {
         );
         // The eye is 1.6 m above the floor (its top is at 0) all the way.
         assert!(
-            tour.keyframes.iter().all(|k| (k.eye[1] - 1.6).abs() < 1e-3),
+            tour.keyframes
+                .iter()
+                .all(|k| (k.eye[1] - EYE_HEIGHT).abs() < 1e-3),
             "{name}: eye heights"
         );
         // The header keeps the frame, as `inspect` reports it.
@@ -357,5 +360,75 @@ fn products_whose_parts_carry_the_shape_are_not_reported_as_left_out() {
             .any(|w| w.contains("#905") && w.contains("left out")),
         "{:?}",
         m.warnings
+    );
+}
+
+/// The tiny building as a GLB whose one root node scales it by `scale` and turns it Z up, as
+/// a glTF exported from a Z-up tool in other units lies.
+fn tiny_glb_lying(dir: &Path, scale: f64) -> PathBuf {
+    let glb = std::fs::read(common::tiny_glb(dir, 5, 2)).unwrap();
+    let g = gltf::Glb::from_slice(&glb).unwrap();
+    let mut json: serde_json::Value = serde_json::from_slice(&g.json).unwrap();
+    let scene = json["scene"].as_u64().unwrap_or(0) as usize;
+    let roots = json["scenes"][scene]["nodes"].clone();
+    let nodes = json["nodes"].as_array_mut().unwrap();
+    // Y up to Z up is a quarter turn about X; its quaternion is (sin 45°, 0, 0, cos 45°).
+    let h = std::f64::consts::FRAC_1_SQRT_2;
+    nodes.push(serde_json::json!({
+        "name": "exporter root",
+        "children": roots,
+        "rotation": [h, 0.0, 0.0, h],
+        "scale": [scale, scale, scale],
+    }));
+    let root = nodes.len() - 1;
+    json["scenes"][scene]["nodes"] = serde_json::json!([root]);
+    let mut text = serde_json::to_vec(&json).unwrap();
+    while text.len() % 4 != 0 {
+        text.push(b' ');
+    }
+    let out = gltf::Glb {
+        header: g.header,
+        json: text.into(),
+        bin: g.bin,
+    };
+    let path = dir.join("lying.glb");
+    std::fs::write(&path, out.to_vec().unwrap()).unwrap();
+    path
+}
+
+#[test]
+fn a_gltf_that_is_not_metres_y_up_is_named_and_the_options_set_it_right() {
+    let dir = tempfile::tempdir().unwrap();
+    let upright = import_file(&common::tiny_glb(dir.path(), 5, 2)).unwrap();
+    assert!(upright.warnings.is_empty(), "{:?}", upright.warnings);
+    let lying = tiny_glb_lying(dir.path(), 100.0);
+    // The format says metres and Y up: kept, but the warning names both options.
+    let m = import_file(&lying).unwrap();
+    let f = &m.frames[0];
+    assert_eq!(
+        (f.unit, f.up, f.up_source),
+        (LengthUnit::Metre, UpAxis::Y, FrameSource::Format)
+    );
+    assert!(
+        m.warnings.iter().any(|w| w.contains("--up z")),
+        "{:?}",
+        m.warnings
+    );
+    assert!(
+        m.warnings.iter().any(|w| w.contains("--units cm")),
+        "{:?}",
+        m.warnings
+    );
+    // Given, the building stands where it stood.
+    let given = FrameOptions {
+        units: Some(LengthUnit::Centimetre),
+        up: Some(UpAxis::Z),
+    };
+    let m = import_file_with(&lying, &given).unwrap();
+    let (a, b) = (upright.bounds(), m.bounds());
+    assert!(
+        Vec3::from(a.min).distance(Vec3::from(b.min)) < 1e-3
+            && Vec3::from(a.max).distance(Vec3::from(b.max)) < 1e-3,
+        "{a:?} against {b:?}"
     );
 }

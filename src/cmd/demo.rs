@@ -217,8 +217,8 @@ fn tour(db: &Path, a: &Args, out: &Path) -> Result<CameraPath> {
         PathKind::Tour,
         a.legs,
         a.seed,
-        1.5,
-        90f32.to_radians(),
+        portico_data::person::WALK_SPEED,
+        portico_data::person::TURN_DEGREES.to_radians(),
     )
     .context("no live cells")?;
     std::fs::write(out.join("path.json"), serde_json::to_vec_pretty(&p)?)?;

@@ -8,6 +8,7 @@ use portico_data::Database;
 use portico_data::cells::CellGraph;
 use portico_data::geometry::Aabb;
 use portico_data::path::{CameraPath, PathKind, standard};
+use portico_data::person;
 use portico_native::net::Remote;
 use std::path::PathBuf;
 
@@ -110,8 +111,8 @@ impl PathArgs {
             kind,
             self.legs,
             self.seed,
-            1.5,
-            90f32.to_radians(),
+            person::WALK_SPEED,
+            person::TURN_DEGREES.to_radians(),
         )
         .context("the model is empty: there is no path to make")
     }
@@ -133,10 +134,10 @@ pub struct Args {
     #[arg(long, default_value_t = 1)]
     seed: u64,
     /// Walking speed, m/s.
-    #[arg(long, default_value_t = 1.5)]
+    #[arg(long, default_value_t = person::WALK_SPEED)]
     speed: f32,
     /// Turning speed, degrees/s.
-    #[arg(long, default_value_t = 90.0)]
+    #[arg(long, default_value_t = person::TURN_DEGREES)]
     turn: f32,
     /// Output path JSON file.
     #[arg(

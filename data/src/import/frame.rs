@@ -41,6 +41,10 @@ const THICKNESS: (f64, f64) = (0.05, 0.5);
 /// A building's width (metres).
 const WIDTH: (f64, f64) = (3.0, 2000.0);
 
+/// The share of the area in slabs below which a model is not read as a building, and its unit
+/// not guessed from storeys and walls it does not have.
+pub const MIN_SLAB_SHARE: f64 = 0.05;
+
 /// Instances placed for the evidence at most (evenly spread over a larger model): the cues are
 /// statistics, and a model of millions of instances need not be walked twice.
 pub const MAX_SAMPLED: usize = 50_000;
@@ -156,6 +160,9 @@ pub struct Evidence {
     pub unit: Option<LengthUnit>,
     /// Why, for reports: wall heights and thicknesses in the file's units.
     pub unit_why: String,
+    /// The share of the area in slabs (thin pieces lying flat): a building has floors
+    /// ([`MIN_SLAB_SHARE`]); an engine or a spider has none, and its unit is not guessed.
+    pub slab_share: f64,
 }
 
 /// Reads the pieces for their up axis and unit (see the module documentation).
@@ -168,12 +175,13 @@ pub fn evidence(pieces: &[Piece]) -> Evidence {
     } else {
         None
     };
-    let (unit, unit_why) = unit_of(pieces, up.unwrap_or(UpAxis::Y));
+    let (unit, unit_why, slab_share) = unit_of(pieces, up.unwrap_or(UpAxis::Y));
     Evidence {
         up,
         concentration,
         unit,
         unit_why,
+        slab_share,
     }
 }
 
@@ -247,7 +255,8 @@ pub fn settle(
     let (unit, unit_why) = if frame.up == ev.up.unwrap_or(UpAxis::Y) {
         (ev.unit, ev.unit_why.clone())
     } else {
-        unit_of(pieces, frame.up)
+        let (u, why, _) = unit_of(pieces, frame.up);
+        (u, why)
     };
     match options.units {
         Some(u) => {
@@ -316,11 +325,14 @@ fn resting_concentration(pieces: &[Piece], axis: usize) -> f64 {
 }
 
 /// The unit that puts the walls' heights, the thin pieces' thicknesses and the building's
-/// width where buildings have them, if one does clearly, and what was measured.
-fn unit_of(pieces: &[Piece], up: UpAxis) -> (Option<LengthUnit>, String) {
+/// width where buildings have them, if one does clearly; what was measured; and the share of
+/// the area in slabs.
+fn unit_of(pieces: &[Piece], up: UpAxis) -> (Option<LengthUnit>, String, f64) {
     let up = up.index();
     let mut heights = Vec::new();
     let mut thicknesses = Vec::new();
+    let total: f64 = pieces.iter().map(|p| p.area).sum();
+    let mut slabs = 0.0;
     for p in pieces {
         let size = p.bounds.max - p.bounds.min;
         let mut axes = [0usize, 1, 2];
@@ -331,6 +343,9 @@ fn unit_of(pieces: &[Piece], up: UpAxis) -> (Option<LengthUnit>, String) {
         }
         if thin > 0.0 {
             thicknesses.push((thin, p.area));
+        }
+        if axes[0] == up {
+            slabs += p.area;
         }
         if axes[0] != up && size[up] > 2.0 * thin {
             heights.push((size[up], p.area));
@@ -349,15 +364,20 @@ fn unit_of(pieces: &[Piece], up: UpAxis) -> (Option<LengthUnit>, String) {
         LengthUnit::ALL.iter().map(|&u| (u, score(u))).collect();
     ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
     let num = |x: Option<f64>| x.map_or("none".to_string(), |v| format!("{}", round3(v)));
+    let slab_share = if total > 0.0 { slabs / total } else { 0.0 };
     let why = format!(
-        "wall heights {}, thicknesses {}, width {} in the file's units",
+        "wall heights {}, thicknesses {}, width {} in the file's units; {:.0} % of the area in slabs",
         num(height),
         num(thickness),
-        num(width)
+        num(width),
+        100.0 * slab_share
     );
     let (best, best_score) = ranked[0];
-    let sure = height.is_some() && best_score > -1.5 && ranked[1].1 < best_score - UNIT_MARGIN;
-    (sure.then_some(best), why)
+    let sure = height.is_some()
+        && slab_share >= MIN_SLAB_SHARE
+        && best_score > -1.5
+        && ranked[1].1 < best_score - UNIT_MARGIN;
+    (sure.then_some(best), why, slab_share)
 }
 
 /// Three significant digits.
@@ -399,25 +419,24 @@ fn weighted_median(v: &mut [(f64, f64)]) -> Option<f64> {
     v.last().map(|x| x.0)
 }
 
-/// The building's width: the larger horizontal span of the 10th to 90th percentile of piece
-/// centres (strays far away do not count), at least the median piece's own span.
+/// The building's width: the larger horizontal span from the 2nd percentile of the pieces'
+/// lowest coordinates to the 98th of their highest (strays far away do not count).
 fn width_of(pieces: &[Piece], up: usize) -> Option<f64> {
     if pieces.is_empty() {
         return None;
     }
-    let mut best: f64 = 0.0;
-    for axis in (0..3).filter(|&a| a != up) {
-        let mut c: Vec<f64> = pieces.iter().map(|p| p.bounds.center()[axis]).collect();
-        c.sort_by(f64::total_cmp);
-        let last = c.len() - 1;
-        let span = c[(last as f64 * 0.9).ceil() as usize] - c[(last as f64 * 0.1).floor() as usize];
-        let mut own: Vec<f64> = pieces
-            .iter()
-            .map(|p| p.bounds.max[axis] - p.bounds.min[axis])
-            .collect();
-        own.sort_by(f64::total_cmp);
-        best = best.max(span).max(own[own.len() / 2]);
-    }
+    let at = |v: &mut Vec<f64>, q: f64| {
+        v.sort_by(f64::total_cmp);
+        v[((v.len() - 1) as f64 * q).round() as usize]
+    };
+    let best = (0..3)
+        .filter(|&a| a != up)
+        .map(|axis| {
+            let mut lo: Vec<f64> = pieces.iter().map(|p| p.bounds.min[axis]).collect();
+            let mut hi: Vec<f64> = pieces.iter().map(|p| p.bounds.max[axis]).collect();
+            at(&mut hi, 0.98) - at(&mut lo, 0.02)
+        })
+        .fold(0.0, f64::max);
     (best > 0.0).then_some(best)
 }
 

@@ -39,15 +39,8 @@ pub(super) fn roomy(graph: &CellGraph, c: u32) -> bool {
     s.x >= 1.0 && s.z >= 1.0 && s.y >= 2.0
 }
 
-/// Lowest eye height through an opening (metres above its sill).
-pub const EYE_HEIGHT: f32 = 1.6;
-/// A door: an opening at least this tall (metres)...
-const DOOR_HEIGHT: f32 = 1.8;
-/// ...whose sill is at most this far (metres) above the lower floor of the cells it joins...
-const DOOR_SILL: f32 = 0.35;
-/// ...and at least this wide (metres); holes in floors too, both ways. Narrower gaps (between
-/// wall segments of an export) are not walked through.
-const DOOR_WIDTH: f32 = 0.5;
+pub use crate::person::EYE_HEIGHT;
+use crate::person::{DOOR_HEIGHT, DOOR_SILL, DOOR_WIDTH};
 
 /// Whether a person walks through this portal: both its cells inside the building (not
 /// touching the sides of the model's box, where the outside is), and it is a door (an

@@ -52,11 +52,14 @@ pub struct Shape<'a> {
     pub colours: &'a [[f32; 4]],
 }
 
+/// What occurrences must have in common to share: their shapes and their colours.
+type Key = (Vec<u128>, Vec<[u32; 4]>);
+
 /// Decides for each product whether it shares another's definition. `kernel_to_model` takes
 /// the kernel's frame to the model's (Z up to Y up, and any unit the user gave).
 pub fn share(shapes: &[Shape], kernel_to_model: &DMat4) -> Vec<Share> {
     let back = kernel_to_model.inverse();
-    let mut templates: HashMap<(Vec<u128>, Vec<[u32; 4]>), Vec<usize>> = HashMap::new();
+    let mut templates: HashMap<Key, Vec<usize>> = HashMap::new();
     let mut out = Vec::with_capacity(shapes.len());
     for (k, s) in shapes.iter().enumerate() {
         let Some(occ) = s.occurrence else {

@@ -1,10 +1,10 @@
 //! IFC (2x3, 4, 4x3) import through the IFClite stack: `ifc-lite-core` parses the STEP file,
 //! `ifc-lite-geometry` meshes each product's body representation, openings subtracted.
 //!
-//! Only what a product's shape shows is drawn ([`representations`]: `Body`, never a door's
+//! Only what a product's shape shows is drawn (`representations.rs`: `Body`, never a door's
 //! `Clearance`). Every product with a shape (walls, slabs, doors, windows, stairs, furniture,
 //! ...) becomes one instance; occurrences of one shape (`IfcMappedItem`s of one representation
-//! map, or identical solids) share one definition ([`instancing`]). Each instance is tagged
+//! map, or identical solids) share one definition (`instancing.rs`). Each instance is tagged
 //! with what the building model knows of it:
 //! `ifc_class` (`IfcWallStandardCase`), `storey` (the `IfcBuildingStorey`'s name), `name` and
 //! `guid`. Walls and slabs are the occluders (`occluder`, as the generator's walls and floors
