@@ -1,4 +1,4 @@
-//! Writing a model as Wavefront OBJ + MTL in any unit and up axis, as SketchUp, 3ds Max or
+//! Writing a model as Wavefront OBJ + MTL (each file written whole, then renamed into place) in any unit and up axis, as SketchUp, 3ds Max or
 //! Revit would: the way to test the importers' frame detection ([`crate::import::frame`]) on
 //! buildings of any size (`portico generate --units cm --up z -o building.obj`).
 
@@ -35,6 +35,9 @@ pub fn write_obj(model: &Model, frame: &SourceFrame, obj: &Path) -> Result<()> {
             continue;
         };
         let m = inst.transform.as_dmat4();
+        // Normals by the inverse transpose; a mirroring transform turns the winding too.
+        let normals = m.inverse().transpose();
+        let mirrored = m.determinant() < 0.0;
         text.push_str(&format!(
             "o {}_{k}\nusemtl m{}\n",
             clean(&inst.name),
@@ -46,11 +49,15 @@ pub fn write_obj(model: &Model, frame: &SourceFrame, obj: &Path) -> Result<()> {
             text.push_str(&format!("v {:.6} {:.6} {:.6}\n", p.x, p.y, p.z));
         }
         for v in &mesh.vertices {
-            let n = (turn * m.transform_vector3(v.normal_f32().as_dvec3())).normalize_or_zero();
+            let n =
+                (turn * normals.transform_vector3(v.normal_f32().as_dvec3())).normalize_or_zero();
             text.push_str(&format!("vn {:.4} {:.4} {:.4}\n", n.x, n.y, n.z));
         }
         for t in mesh.indices.chunks_exact(3) {
-            let [a, b, c] = [t[0], t[1], t[2]].map(|i| i as usize + base);
+            let [a, mut b, mut c] = [t[0], t[1], t[2]].map(|i| i as usize + base);
+            if mirrored {
+                std::mem::swap(&mut b, &mut c);
+            }
             text.push_str(&format!("f {a}//{a} {b}//{b} {c}//{c}\n"));
         }
         base += mesh.vertices.len();

@@ -5,8 +5,8 @@
 //! would otherwise be walked 1.6 cm above its floor or along a wall. Importers find the frame
 //! (the file format says, the model's own geometry says, or the user gives it:
 //! [`crate::import::frame`]) and convert at import; the database keeps each source's frame in
-//! its header, beside the local origin, so the model can be placed back in the source's
-//! coordinates: `source = frame.to_metres_y_up()⁻¹ · (local + origin)`.
+//! its header, beside the local origin, so a model built from one source can be placed back in
+//! its coordinates: `source = frame.to_metres_y_up()⁻¹ · (local + origin)`.
 
 use glam::{DMat4, DVec3};
 use serde::{Deserialize, Serialize};

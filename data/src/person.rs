@@ -1,6 +1,7 @@
 //! The person a walkthrough assumes, in metres and seconds: how high the eyes are, how fast
-//! they walk and turn, and what a door is. These are the only person-scale numbers; they hold
-//! because the importers convert every model to metres with Y up first ([`crate::frame`]).
+//! they walk and turn, what a door is and what a room a tour visits is. These are the
+//! person-scale numbers the paths use; they hold because the importers convert every model to
+//! metres with Y up first ([`crate::frame`]).
 //! The building's own structural tests are metres too (the wall test's 8 cm–1 m,
 //! [`crate::cells::occluders::MIN_WALL_THICKNESS`] and [`crate::cells::cover::MAX_THICKNESS`]).
 
@@ -24,3 +25,9 @@ pub const DOOR_SILL: f32 = 0.35;
 /// ...and at least this wide (metres); holes in floors too, both ways. Narrower gaps (between
 /// wall segments of an export) are not walked through.
 pub const DOOR_WIDTH: f32 = 0.5;
+
+/// A cell a tour visits is at least this wide and deep (metres)...
+pub const ROOM_WIDTH: f32 = 1.0;
+
+/// ...and this high (metres): a person stands in it.
+pub const ROOM_HEIGHT: f32 = 2.0;

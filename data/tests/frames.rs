@@ -195,7 +195,8 @@ fn model_pieces(m: &Model, to_file: &DMat4) -> Vec<Piece> {
 #[test]
 fn generated_buildings_in_every_unit_and_up_axis_are_found() {
     let dir = tempfile::tempdir().unwrap();
-    for (seed, floors) in [(5, 2), (11, 3)] {
+    // Two storeys to twenty: a tower's repeated floors must not turn it on its side.
+    for (seed, floors) in [(5, 2), (11, 3), (7, 20)] {
         let glb = common::tiny_glb(dir.path(), seed, floors);
         let model = import_file(&glb).unwrap();
         for unit in LengthUnit::ALL {
@@ -302,7 +303,7 @@ fn mapped_chairs_are_instances_of_one_definition() {
         chairs.iter().all(|c| c.def == chairs[0].def),
         "one definition for all chairs"
     );
-    // Each chair stands where the file puts it: the same box as the kernel's own copy.
+    // The last chair, placed by its shared definition's transform, stands on the floor.
     let far = chairs.last().unwrap();
     let placed = mapped.defs[far.def as usize].lods[0]
         .bounds()

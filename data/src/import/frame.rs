@@ -4,12 +4,13 @@
 //! joined where their positions are equal), so an OBJ that groups a whole building by material
 //! still shows its walls, slabs, columns and chairs one by one. Then:
 //!
-//! - **Up**: things rest on floors. Along the axis that points up, the pieces' lowest points
-//!   gather on a few levels (every wall, column and chair of a storey starts on its floor);
-//!   along a horizontal axis they spread over every room's wall line and every chair's place.
-//!   The concentration of the pieces' lowest points (the sum of the squared shares of each
-//!   level, a Herfindahl index) is compared between Y and Z; one must beat the other by
-//!   [`UP_MARGIN`].
+//! - **Up**: things rest on things. Along the axis that points up, a wall, a column or a chair
+//!   starts where something under it ends (its lowest point on another piece's highest, their
+//!   footprints overlapping); along a horizontal axis only the walls that abut others do, and
+//!   chairs stand clear of walls. The share of pieces resting so (pieces thin along the axis,
+//!   slabs on walls or walls against walls, left out) is compared between Y and Z; one must beat
+//!   the other by [`UP_MARGIN`], and reach [`MIN_RESTING`]. The share does not fall with the number of storeys, as a count
+//!   of levels would.
 //! - **Unit**: with the up axis known, walls are the thin pieces standing on edge (their
 //!   thinnest side horizontal, under a third of their next side) and slabs the thin pieces
 //!   lying flat. The walls' heights (the storey, 2.3–4 m), the thin pieces' thicknesses
@@ -29,10 +30,17 @@ use rustc_hash::FxHashMap;
 /// it to be called up.
 pub const UP_MARGIN: f64 = 1.25;
 
+/// The share of pieces that must rest on others along the up axis: a building's walls and
+/// furniture stand on its floors; a spider or an engine has no floors to say which way is up.
+pub const MIN_RESTING: f64 = 0.2;
+
 /// How much better (in log-plausibility: e-folds outside the ranges below) the best unit must
 /// fit than the next. Neighbouring units differ by 2.54× (cm and in) or more, an e-fold of 0.93,
 /// of which the storey range's own width takes 0.55.
 pub const UNIT_MARGIN: f64 = 0.3;
+
+/// What a rarely used unit (decimetres) costs against the others, in e-folds.
+const RARE: f64 = 0.3;
 
 /// Storey heights (metres): the height of a wall piece in a building.
 const STOREY: (f64, f64) = (2.3, 4.0);
@@ -71,6 +79,12 @@ impl Piece {
     /// The piece moved by `m`: its box's corners placed, its area scaled by `m`'s largest
     /// axis scale squared.
     pub fn placed(&self, m: &DMat4) -> Piece {
+        let s = m.to_scale_rotation_translation().0.abs().max_element();
+        self.placed_scaled(m, s)
+    }
+
+    /// [`Piece::placed`] with `m`'s largest axis scale already known.
+    pub fn placed_scaled(&self, m: &DMat4, scale: f64) -> Piece {
         let mut bounds = DBox::EMPTY;
         for i in 0..8 {
             let pick = |bit: usize, axis: usize| {
@@ -82,10 +96,9 @@ impl Piece {
             };
             bounds.include(m.transform_point3(DVec3::new(pick(1, 0), pick(2, 1), pick(4, 2))));
         }
-        let s = m.to_scale_rotation_translation().0.abs().max_element();
         Piece {
             bounds,
-            area: self.area * s * s,
+            area: self.area * scale * scale,
         }
     }
 }
@@ -153,8 +166,8 @@ pub fn pieces_of(positions: &[DVec3], indices: &[u32], to_world: &DMat4) -> Vec<
 pub struct Evidence {
     /// The axis the pieces rest along, if one clearly does.
     pub up: Option<UpAxis>,
-    /// Concentration of the pieces' lowest points along Y and along Z.
-    pub concentration: [f64; 2],
+    /// The share of pieces resting on another along Y and along Z.
+    pub resting: [f64; 2],
     /// The unit that puts the storeys, thicknesses and width where buildings have them, if
     /// one clearly does (read with `up`, or Y when that is unknown).
     pub unit: Option<LengthUnit>,
@@ -167,10 +180,10 @@ pub struct Evidence {
 
 /// Reads the pieces for their up axis and unit (see the module documentation).
 pub fn evidence(pieces: &[Piece]) -> Evidence {
-    let concentration = [1, 2].map(|axis| resting_concentration(pieces, axis));
-    let up = if concentration[1] > concentration[0] * UP_MARGIN {
+    let resting = [1, 2].map(|axis| resting_share(pieces, axis));
+    let up = if resting[1] > resting[0] * UP_MARGIN && resting[1] >= MIN_RESTING {
         Some(UpAxis::Z)
-    } else if concentration[0] > concentration[1] * UP_MARGIN {
+    } else if resting[0] > resting[1] * UP_MARGIN && resting[0] >= MIN_RESTING {
         Some(UpAxis::Y)
     } else {
         None
@@ -178,7 +191,7 @@ pub fn evidence(pieces: &[Piece]) -> Evidence {
     let (unit, unit_why, slab_share) = unit_of(pieces, up.unwrap_or(UpAxis::Y));
     Evidence {
         up,
-        concentration,
+        resting,
         unit,
         unit_why,
         slab_share,
@@ -208,13 +221,13 @@ pub fn settle(
     }
     let ev = evidence(pieces);
     let up_why = format!(
-        "pieces rest on levels along {}: concentration {:.2} along Y, {:.2} along Z",
+        "pieces rest on others along {}: {:.0} % along Y, {:.0} % along Z",
         ev.up.map_or("neither axis clearly", |u| match u {
             UpAxis::Y => "Y",
             UpAxis::Z => "Z",
         }),
-        ev.concentration[0],
-        ev.concentration[1]
+        100.0 * ev.resting[0],
+        100.0 * ev.resting[1]
     );
     match options.up {
         Some(u) => {
@@ -251,8 +264,9 @@ pub fn settle(
             }
         }
     }
-    // The unit read with the up axis settled above.
-    let (unit, unit_why) = if frame.up == ev.up.unwrap_or(UpAxis::Y) {
+    // The unit read with the up axis settled above (for a format that fixes its frame, with
+    // the axis the model looks up along, which the warning names too).
+    let (unit, unit_why) = if !detect || frame.up == ev.up.unwrap_or(UpAxis::Y) {
         (ev.unit, ev.unit_why.clone())
     } else {
         let (u, why, _) = unit_of(pieces, frame.up);
@@ -296,32 +310,73 @@ pub fn settle(
     (frame, warnings)
 }
 
-/// The concentration of the pieces' lowest points along `axis`: the sum over levels of the
-/// squared share of pieces starting there (1 when all start on one level). Levels are 0.2 %
-/// of the model's extent along the axis apart.
-fn resting_concentration(pieces: &[Piece], axis: usize) -> f64 {
-    if pieces.is_empty() {
+/// Pieces asked about at most (evenly spread over a larger model).
+const MAX_ASKED: usize = 20_000;
+
+/// Supporters looked at per level at most (the largest first).
+const MAX_LOOKED: usize = 64;
+
+/// The share of pieces (not thin along `axis`) whose lowest point along `axis` lies on another
+/// piece's highest, with their boxes overlapping across it: resting on it, if `axis` is up.
+fn resting_share(pieces: &[Piece], axis: usize) -> f64 {
+    if pieces.len() < 2 {
         return 0.0;
     }
-    let mut mins: Vec<f64> = pieces.iter().map(|p| p.bounds.min[axis]).collect();
-    mins.sort_by(f64::total_cmp);
-    let lo = mins[0];
+    let lo = pieces
+        .iter()
+        .map(|p| p.bounds.min[axis])
+        .fold(f64::INFINITY, f64::min);
     let hi = pieces
         .iter()
         .map(|p| p.bounds.max[axis])
         .fold(f64::NEG_INFINITY, f64::max);
-    let tol = ((hi - lo) * 0.002).max(f64::MIN_POSITIVE);
-    // Runs of lowest points no further than `tol` from the run's first.
-    let mut sum = 0.0;
-    let mut start = 0;
-    for i in 1..=mins.len() {
-        if i == mins.len() || mins[i] - mins[start] > tol {
-            let share = (i - start) as f64 / mins.len() as f64;
-            sum += share * share;
-            start = i;
-        }
+    let tol = ((hi - lo) * 0.001).max(f64::MIN_POSITIVE);
+    let key = |v: f64| ((v - lo) / tol).round() as i64;
+    // Supporters by the level of their top, the largest footprint first.
+    let across = |p: &Piece| {
+        let s = p.bounds.max - p.bounds.min;
+        (0..3).filter(|&a| a != axis).map(|a| s[a]).product::<f64>()
+    };
+    let mut tops: FxHashMap<i64, Vec<usize>> = FxHashMap::default();
+    for (i, p) in pieces.iter().enumerate() {
+        tops.entry(key(p.bounds.max[axis])).or_default().push(i);
     }
-    sum
+    for list in tops.values_mut() {
+        list.sort_by(|&a, &b| across(&pieces[b]).total_cmp(&across(&pieces[a])));
+        list.truncate(MAX_LOOKED);
+    }
+    let overlaps = |a: &Piece, b: &Piece| {
+        (0..3).filter(|&x| x != axis).all(|x| {
+            a.bounds.min[x] < b.bounds.max[x] - tol && b.bounds.min[x] < a.bounds.max[x] - tol
+        })
+    };
+    let stride = pieces.len().div_ceil(MAX_ASKED).max(1);
+    let (mut asked, mut resting) = (0usize, 0usize);
+    for (i, p) in pieces.iter().enumerate().step_by(stride) {
+        let s = p.bounds.max - p.bounds.min;
+        let mut others: Vec<f64> = (0..3).filter(|&a| a != axis).map(|a| s[a]).collect();
+        others.sort_by(f64::total_cmp);
+        if s[axis] <= others[0] / 3.0 {
+            continue; // thin along the axis: a slab on walls, a wall against a wall
+        }
+        asked += 1;
+        let k = key(p.bounds.min[axis]);
+        let on = (k - 1..=k + 1).any(|k| {
+            tops.get(&k).is_some_and(|list| {
+                list.iter().any(|&j| {
+                    j != i
+                        && (pieces[j].bounds.max[axis] - p.bounds.min[axis]).abs() <= tol
+                        && overlaps(p, &pieces[j])
+                })
+            })
+        });
+        resting += on as usize;
+    }
+    if asked == 0 {
+        0.0
+    } else {
+        resting as f64 / asked as f64
+    }
 }
 
 /// The unit that puts the walls' heights, the thin pieces' thicknesses and the building's
@@ -359,6 +414,11 @@ fn unit_of(pieces: &[Piece], up: UpAxis) -> (Option<LengthUnit>, String, f64) {
         height.map_or(0.0, |h| fit(h * m, STOREY))
             + thickness.map_or(0.0, |t| fit(t * m, THICKNESS))
             + width.map_or(0.0, |w| fit(w * m, WIDTH))
+            - if u == LengthUnit::Decimetre {
+                RARE
+            } else {
+                0.0
+            }
     };
     let mut ranked: Vec<(LengthUnit, f64)> =
         LengthUnit::ALL.iter().map(|&u| (u, score(u))).collect();
@@ -373,7 +433,9 @@ fn unit_of(pieces: &[Piece], up: UpAxis) -> (Option<LengthUnit>, String, f64) {
         100.0 * slab_share
     );
     let (best, best_score) = ranked[0];
-    let sure = height.is_some()
+    // Found only when the storey itself fits: the other cues cannot tell units 10× apart.
+    let storey_fits = height.is_some_and(|h| fit(h * best.metres(), STOREY) > -0.5);
+    let sure = storey_fits
         && slab_share >= MIN_SLAB_SHARE
         && best_score > -1.5
         && ranked[1].1 < best_score - UNIT_MARGIN;
@@ -497,9 +559,7 @@ mod tests {
                 let pieces = placed(&house(), frame.to_metres_y_up().inverse());
                 let ev = evidence(&pieces);
                 assert_eq!(ev.up, Some(up), "{unit:?} {up:?}: {ev:?}");
-                if unit != LengthUnit::Decimetre {
-                    assert_eq!(ev.unit, Some(unit), "{unit:?} {up:?}: {ev:?}");
-                }
+                assert_eq!(ev.unit, Some(unit), "{unit:?} {up:?}: {ev:?}");
             }
         }
     }

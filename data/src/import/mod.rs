@@ -59,7 +59,7 @@ pub fn import_file_with(path: &Path, options: &FrameOptions) -> Result<Model> {
 /// libraries): `ext` is `obj`, `gltf` or `glb`. For fuzzing and tests.
 pub fn import_bytes(bytes: &[u8], ext: &str) -> std::result::Result<Model, String> {
     let options = FrameOptions::default();
-    let model = match ext {
+    let mut model = match ext {
         "obj" => obj::import_slice(bytes, None, &options),
         "gltf" | "glb" => gltf::import_slice(bytes, None, &options),
         "ifc" => ifc::import_slice(bytes, &options),
@@ -68,6 +68,8 @@ pub fn import_bytes(bytes: &[u8], ext: &str) -> std::result::Result<Model, Strin
     if model.instances.is_empty() {
         return Err("contains no triangle meshes".into());
     }
+    // The frame the importer pushed describes these bytes: they are the model's one source.
+    model.sources.push(format!("({ext} bytes)"));
     Ok(model)
 }
 

@@ -36,11 +36,11 @@ fn closed_room(graph: &CellGraph) -> Option<u32> {
 /// window, which is live too but leads nowhere worth seeing.
 pub(super) fn roomy(graph: &CellGraph, c: u32) -> bool {
     let s = graph.cells[c as usize].bounds.size();
-    s.x >= 1.0 && s.z >= 1.0 && s.y >= 2.0
+    s.x >= ROOM_WIDTH && s.z >= ROOM_WIDTH && s.y >= ROOM_HEIGHT
 }
 
 pub use crate::person::EYE_HEIGHT;
-use crate::person::{DOOR_HEIGHT, DOOR_SILL, DOOR_WIDTH};
+use crate::person::{DOOR_HEIGHT, DOOR_SILL, DOOR_WIDTH, ROOM_HEIGHT, ROOM_WIDTH};
 
 /// Whether a person walks through this portal: both its cells inside the building (not
 /// touching the sides of the model's box, where the outside is), and it is a door (an

@@ -13,6 +13,10 @@
 use glam::{DMat4, DVec3};
 use std::collections::HashMap;
 
+/// Definitions of one shape and colours tried for each occurrence at most (shapes the kernel
+/// cut differently each keep their own, and each is not tried again and again).
+pub const MAX_TEMPLATES: usize = 8;
+
 /// How far (metres) a shared copy's vertices may lie from the occurrence's own.
 pub const TOLERANCE: f64 = 1e-4;
 
@@ -59,7 +63,9 @@ type Key = (Vec<u128>, Vec<[u32; 4]>);
 /// the kernel's frame to the model's (Z up to Y up, and any unit the user gave).
 pub fn share(shapes: &[Shape], kernel_to_model: &DMat4) -> Vec<Share> {
     let back = kernel_to_model.inverse();
-    let mut templates: HashMap<Key, Vec<usize>> = HashMap::new();
+    // Per key, up to MAX_TEMPLATES products whose definitions others may share, each with
+    // its placement's inverse.
+    let mut templates: HashMap<Key, Vec<(usize, DMat4)>> = HashMap::new();
     let mut out = Vec::with_capacity(shapes.len());
     for (k, s) in shapes.iter().enumerate() {
         let Some(occ) = s.occurrence else {
@@ -68,15 +74,16 @@ pub fn share(shapes: &[Shape], kernel_to_model: &DMat4) -> Vec<Share> {
         };
         let key = (occ.shapes.clone(), colour_runs(s.colours));
         let candidates = templates.entry(key).or_default();
-        let found = candidates.iter().find_map(|&t| {
-            let first = shapes[t].occurrence?;
-            let moved = *kernel_to_model * occ.placement * first.placement.inverse() * back;
+        let found = candidates.iter().find_map(|&(t, first_inverse)| {
+            let moved = *kernel_to_model * occ.placement * first_inverse * back;
             fits(&shapes[t], s, &moved).then_some(Share::Copy { of: t, moved })
         });
         match found {
             Some(share) => out.push(share),
             None => {
-                candidates.push(k);
+                if candidates.len() < MAX_TEMPLATES {
+                    candidates.push((k, occ.placement.inverse()));
+                }
                 out.push(Share::Own);
             }
         }

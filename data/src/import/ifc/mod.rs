@@ -282,15 +282,16 @@ fn import_unguarded(bytes: &[u8], options: &FrameOptions) -> Result<Model, Strin
     for id in spaces {
         match space_box(id, &router, &mut decoder) {
             Ok(Some((name, b))) => {
-                let b = Aabb {
-                    min: b.min.as_vec3().to_array(),
-                    max: b.max.as_vec3().to_array(),
-                };
-                let moved = (to_local * space_frame).as_mat4();
+                // Moved in f64, before survey coordinates are narrowed.
+                let moved = to_local * space_frame;
+                let mut local = Aabb::EMPTY;
+                for corner in [b.min, b.max] {
+                    local.include(moved.transform_point3(corner).as_vec3());
+                }
                 model.spaces.push(Space {
                     name,
                     storey: rel.storey_name(id),
-                    bounds: b.transformed(&moved),
+                    bounds: local,
                 });
             }
             Ok(None) => {}
@@ -329,23 +330,31 @@ fn settle_frame(
         up_source: FrameSource::Format,
         up_why: "IFC".into(),
     };
-    // The geometry in the file's own numbers, for the evidence.
-    let to_file = (UpAxis::Z.to_y_up() * DMat4::from_scale(DVec3::splat(unit_scale))).inverse();
+    // The geometry in the file's own numbers, for the evidence (none needed when both are
+    // given).
     let mut pieces: Vec<Piece> = Vec::new();
-    let stride = parts.len().div_ceil(super::frame::MAX_SAMPLED).max(1);
-    for p in parts.iter().step_by(stride) {
-        pieces.extend(pieces_of(&p.positions, &p.indices, &to_file));
+    if options.units.is_none() || options.up.is_none() {
+        let to_file = (UpAxis::Z.to_y_up() * DMat4::from_scale(DVec3::splat(unit_scale))).inverse();
+        let stride = parts.len().div_ceil(super::frame::MAX_SAMPLED).max(1);
+        for p in parts.iter().step_by(stride) {
+            pieces.extend(pieces_of(&p.positions, &p.indices, &to_file));
+        }
     }
     let (frame, said) = settle(&pieces, &file, false, options);
     warnings.extend(said);
     let kernel_y_up = UpAxis::Z.to_y_up();
-    if frame.unit == file.unit && frame.up == file.up {
+    if options
+        .units
+        .is_none_or(|u| u == file.unit && declared.is_some())
+        && frame.up == file.up
+    {
         return (frame, kernel_y_up);
     }
-    // From the kernel's frame (declared metres, Z up) back to the file's numbers, then on to
-    // metres and Y up as the user says.
-    let kernel_to_file = DMat4::from_scale(DVec3::splat(1.0 / unit_scale));
-    let kernel_to_model = frame.to_metres_y_up() * kernel_to_file;
+    // From the kernel's frame (declared metres, Z up) to the model's: the unit given over the
+    // declared one (without one, the kernel's metres stand: a declared unit this crate has no
+    // name for, yards say, keeps its true size), then the up axis given.
+    let rescale = options.units.map_or(1.0, |u| u.metres() / unit_scale);
+    let kernel_to_model = frame.up.to_y_up() * DMat4::from_scale(DVec3::splat(rescale));
     let fix = kernel_to_model * kernel_y_up.inverse();
     let turn = fix.to_scale_rotation_translation().1;
     for p in parts.iter_mut() {

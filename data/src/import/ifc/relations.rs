@@ -31,8 +31,9 @@ pub struct Relations {
     pub material_colour: FxHashMap<u32, [f32; 4]>,
     /// Product → its material (or the first layer's material of a layer set).
     pub material_of: FxHashMap<u32, u32>,
-    /// Products made of parts (`IfcRelAggregates`, `IfcRelNests`: an `IfcElementAssembly`,
-    /// a roof of slabs, a stair of flights): their parts carry the shape.
+    /// Products made of parts (`IfcRelAggregates`: an `IfcElementAssembly`, a roof of slabs,
+    /// a stair of flights): their parts carry the shape. (`IfcRelNests` is not read: IFC4 nests
+    /// shapeless ports under every duct and pipe, which carry no shape of their host.)
     pub wholes: rustc_hash::FxHashSet<u32>,
 }
 
@@ -61,7 +62,6 @@ pub fn scan(content: &str) -> Relations {
             "IFCRELVOIDSELEMENT"
                 | "IFCRELCONTAINEDINSPATIALSTRUCTURE"
                 | "IFCRELAGGREGATES"
-                | "IFCRELNESTS"
                 | "IFCBUILDINGSTOREY"
                 | "IFCSTYLEDITEM"
                 | "IFCMATERIALDEFINITIONREPRESENTATION"
@@ -88,11 +88,6 @@ pub fn scan(content: &str) -> Relations {
                 if let (Some(whole), Some(parts)) = (e.get_ref(4), e.get_refs(5)) {
                     rel.wholes.insert(whole);
                     contained.push((whole, parts));
-                }
-            }
-            "IFCRELNESTS" => {
-                if let Some(whole) = e.get_ref(4) {
-                    rel.wholes.insert(whole);
                 }
             }
             "IFCBUILDINGSTOREY" => {

@@ -111,7 +111,7 @@ pub fn import_slice(
         .iter()
         .filter(|m| !m.mesh.indices.is_empty())
         .collect();
-    let source: Vec<Vec<DVec3>> = objects
+    let mut world: Vec<Vec<DVec3>> = objects
         .iter()
         .map(|m| {
             m.mesh
@@ -123,21 +123,19 @@ pub fn import_slice(
         .collect();
     let pieces: Vec<Piece> = objects
         .iter()
-        .zip(&source)
+        .zip(&world)
         .flat_map(|(m, p)| pieces_of(p, &m.mesh.indices, &DMat4::IDENTITY))
         .collect();
     let (frame, frame_warnings) = settle(&pieces, &SourceFrame::metres_y_up(), true, options);
+    drop(pieces);
     warnings.extend(frame_warnings);
     let to_metres = frame.to_metres_y_up();
     let turn = frame.up.to_y_up();
-    let world: Vec<Vec<DVec3>> = source
-        .into_iter()
-        .map(|p| {
-            p.into_iter()
-                .map(|q| to_metres.transform_point3(q))
-                .collect()
-        })
-        .collect();
+    if !frame.is_identity() {
+        for q in world.iter_mut().flatten() {
+            *q = to_metres.transform_point3(*q);
+        }
+    }
     model.frames.push(frame);
     let boxes: Vec<DBox> = world
         .iter()
