@@ -384,7 +384,7 @@ fn tiny_glb_lying(dir: &Path, scale: f64) -> PathBuf {
     let root = nodes.len() - 1;
     json["scenes"][scene]["nodes"] = serde_json::json!([root]);
     let mut text = serde_json::to_vec(&json).unwrap();
-    while text.len() % 4 != 0 {
+    while !text.len().is_multiple_of(4) {
         text.push(b' ');
     }
     let out = gltf::Glb {

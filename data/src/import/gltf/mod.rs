@@ -61,7 +61,7 @@ pub fn import(path: &Path, options: &FrameOptions) -> Result<Model> {
 /// Imports glTF or GLB bytes; external buffers are read from `base` (refused when `None`).
 /// The error is one line naming the element at fault (without the file name). glTF is metres
 /// and Y up by its specification: the frame `options` give is applied, and a model whose
-/// geometry clearly says otherwise gets a warning naming the options ([`frame::settle`]).
+/// geometry clearly says otherwise gets a warning naming the options ([`crate::import::frame::settle`]).
 pub fn import_slice(
     bytes: &[u8],
     base: Option<&Path>,
