@@ -11,11 +11,13 @@
 //!   slabs on walls or walls against walls, left out) is compared between Y and Z; one must beat
 //!   the other by [`UP_MARGIN`], and reach [`MIN_RESTING`]. The share does not fall with the number of storeys, as a count
 //!   of levels would.
-//! - **Unit**: with the up axis known, walls are the thin pieces standing on edge (their
-//!   thinnest side horizontal, under a third of their next side) and slabs the thin pieces
-//!   lying flat. The walls' heights (the storey, 2.3–4 m), the thin pieces' thicknesses
-//!   (5–50 cm) and the building's width (3 m–2 km) are read in
-//!   each unit; the unit that puts them where buildings have them wins, and it must win by
+//! - **Unit**: with the up axis known, the storey is the height of the pieces that rest on
+//!   one piece and carry another (a wall between a floor and the slab above, a column under an
+//!   arch; a gable wall or an atrium's façade rising through several storeys does not count),
+//!   else the height of the walls (thin pieces standing on edge: their thinnest side
+//!   horizontal, under a third of their next side). The storey (2.3–4 m), the thin pieces'
+//!   thicknesses (5–50 cm) and the building's width (3 m–2 km) are read in each unit; the unit
+//!   that puts them where buildings have them wins, and it must win by
 //!   [`UNIT_MARGIN`] to be called found.
 //!
 //! A frame given on the command line is used as given; a guess that is not confident keeps
@@ -180,7 +182,8 @@ pub struct Evidence {
 
 /// Reads the pieces for their up axis and unit (see the module documentation).
 pub fn evidence(pieces: &[Piece]) -> Evidence {
-    let resting = [1, 2].map(|axis| resting_share(pieces, axis));
+    let touching = [1, 2].map(|axis| contacts(pieces, axis));
+    let resting = [touching[0].resting, touching[1].resting];
     let up = if resting[1] > resting[0] * UP_MARGIN && resting[1] >= MIN_RESTING {
         Some(UpAxis::Z)
     } else if resting[0] > resting[1] * UP_MARGIN && resting[0] >= MIN_RESTING {
@@ -188,7 +191,9 @@ pub fn evidence(pieces: &[Piece]) -> Evidence {
     } else {
         None
     };
-    let (unit, unit_why, slab_share) = unit_of(pieces, up.unwrap_or(UpAxis::Y));
+    let read_up = up.unwrap_or(UpAxis::Y);
+    let (unit, unit_why, slab_share) =
+        unit_of(pieces, read_up, &touching[read_up.index() - 1].between);
     Evidence {
         up,
         resting,
@@ -269,7 +274,11 @@ pub fn settle(
     let (unit, unit_why) = if !detect || frame.up == ev.up.unwrap_or(UpAxis::Y) {
         (ev.unit, ev.unit_why.clone())
     } else {
-        let (u, why, _) = unit_of(pieces, frame.up);
+        let (u, why, _) = unit_of(
+            pieces,
+            frame.up,
+            &contacts(pieces, frame.up.index()).between,
+        );
         (u, why)
     };
     match options.units {
@@ -316,11 +325,23 @@ const MAX_ASKED: usize = 20_000;
 /// Supporters looked at per level at most (the largest first).
 const MAX_LOOKED: usize = 64;
 
-/// The share of pieces (not thin along `axis`) whose lowest point along `axis` lies on another
-/// piece's highest, with their boxes overlapping across it: resting on it, if `axis` is up.
-fn resting_share(pieces: &[Piece], axis: usize) -> f64 {
+/// How the pieces touch along one axis.
+#[derive(Debug, Clone, Default)]
+struct Contacts {
+    /// The share of the pieces asked (those not thin along the axis) whose lowest point lies
+    /// on another piece's highest, their boxes overlapping across it: resting on it, if the
+    /// axis is up.
+    resting: f64,
+    /// The heights and areas of the pieces that rest on one piece and carry another (a wall
+    /// between a floor and the slab above, a column under an arch): the storeys, if the axis
+    /// is up.
+    between: Vec<(f64, f64)>,
+}
+
+/// How the pieces touch along `axis` (see [`Contacts`]).
+fn contacts(pieces: &[Piece], axis: usize) -> Contacts {
     if pieces.len() < 2 {
-        return 0.0;
+        return Contacts::default();
     }
     let lo = pieces
         .iter()
@@ -332,16 +353,18 @@ fn resting_share(pieces: &[Piece], axis: usize) -> f64 {
         .fold(f64::NEG_INFINITY, f64::max);
     let tol = ((hi - lo) * 0.001).max(f64::MIN_POSITIVE);
     let key = |v: f64| ((v - lo) / tol).round() as i64;
-    // Supporters by the level of their top, the largest footprint first.
+    // Pieces by the level of their top and of their bottom, the largest footprint first.
     let across = |p: &Piece| {
         let s = p.bounds.max - p.bounds.min;
         (0..3).filter(|&a| a != axis).map(|a| s[a]).product::<f64>()
     };
     let mut tops: FxHashMap<i64, Vec<usize>> = FxHashMap::default();
+    let mut bottoms: FxHashMap<i64, Vec<usize>> = FxHashMap::default();
     for (i, p) in pieces.iter().enumerate() {
         tops.entry(key(p.bounds.max[axis])).or_default().push(i);
+        bottoms.entry(key(p.bounds.min[axis])).or_default().push(i);
     }
-    for list in tops.values_mut() {
+    for list in tops.values_mut().chain(bottoms.values_mut()) {
         list.sort_by(|&a, &b| across(&pieces[b]).total_cmp(&across(&pieces[a])));
         list.truncate(MAX_LOOKED);
     }
@@ -350,8 +373,23 @@ fn resting_share(pieces: &[Piece], axis: usize) -> f64 {
             a.bounds.min[x] < b.bounds.max[x] - tol && b.bounds.min[x] < a.bounds.max[x] - tol
         })
     };
+    // Whether a piece of `levels` other than `i` has its level (top or bottom) at `at` and
+    // overlaps piece `i`.
+    let touches = |levels: &FxHashMap<i64, Vec<usize>>, i: usize, at: f64, top: bool| {
+        let k = key(at);
+        (k - 1..=k + 1).any(|k| {
+            levels.get(&k).is_some_and(|list| {
+                list.iter().any(|&j| {
+                    let b = &pieces[j].bounds;
+                    let level = if top { b.max[axis] } else { b.min[axis] };
+                    j != i && (level - at).abs() <= tol && overlaps(&pieces[i], &pieces[j])
+                })
+            })
+        })
+    };
     let stride = pieces.len().div_ceil(MAX_ASKED).max(1);
     let (mut asked, mut resting) = (0usize, 0usize);
+    let mut between = Vec::new();
     for (i, p) in pieces.iter().enumerate().step_by(stride) {
         let s = p.bounds.max - p.bounds.min;
         let mut others: Vec<f64> = (0..3).filter(|&a| a != axis).map(|a| s[a]).collect();
@@ -360,29 +398,31 @@ fn resting_share(pieces: &[Piece], axis: usize) -> f64 {
             continue; // thin along the axis: a slab on walls, a wall against a wall
         }
         asked += 1;
-        let k = key(p.bounds.min[axis]);
-        let on = (k - 1..=k + 1).any(|k| {
-            tops.get(&k).is_some_and(|list| {
-                list.iter().any(|&j| {
-                    j != i
-                        && (pieces[j].bounds.max[axis] - p.bounds.min[axis]).abs() <= tol
-                        && overlaps(p, &pieces[j])
-                })
-            })
-        });
-        resting += on as usize;
+        if touches(&tops, i, p.bounds.min[axis], true) {
+            resting += 1;
+            if touches(&bottoms, i, p.bounds.max[axis], false) {
+                between.push((s[axis], p.area));
+            }
+        }
     }
-    if asked == 0 {
-        0.0
-    } else {
-        resting as f64 / asked as f64
+    Contacts {
+        resting: if asked == 0 {
+            0.0
+        } else {
+            resting as f64 / asked as f64
+        },
+        between,
     }
 }
 
 /// The unit that puts the walls' heights, the thin pieces' thicknesses and the building's
 /// width where buildings have them, if one does clearly; what was measured; and the share of
 /// the area in slabs.
-fn unit_of(pieces: &[Piece], up: UpAxis) -> (Option<LengthUnit>, String, f64) {
+fn unit_of(
+    pieces: &[Piece],
+    up: UpAxis,
+    between: &[(f64, f64)],
+) -> (Option<LengthUnit>, String, f64) {
     let up = up.index();
     let mut heights = Vec::new();
     let mut thicknesses = Vec::new();
@@ -406,7 +446,13 @@ fn unit_of(pieces: &[Piece], up: UpAxis) -> (Option<LengthUnit>, String, f64) {
             heights.push((size[up], p.area));
         }
     }
-    let height = weighted_median(&mut heights);
+    // The storey: what stands between a floor and what it carries where anything does (a
+    // gable wall or an atrium's façade rises through several), else the walls' heights.
+    let mut storeys = between.to_vec();
+    let (height, measured) = match weighted_median(&mut storeys) {
+        Some(h) => (Some(h), "storeys"),
+        None => (weighted_median(&mut heights), "wall heights"),
+    };
     let thickness = weighted_median(&mut thicknesses);
     let width = width_of(pieces, up);
     let score = |u: LengthUnit| {
@@ -426,7 +472,7 @@ fn unit_of(pieces: &[Piece], up: UpAxis) -> (Option<LengthUnit>, String, f64) {
     let num = |x: Option<f64>| x.map_or("none".to_string(), |v| format!("{}", round3(v)));
     let slab_share = if total > 0.0 { slabs / total } else { 0.0 };
     let why = format!(
-        "wall heights {}, thicknesses {}, width {} in the file's units; {:.0} % of the area in slabs",
+        "{measured} {}, thicknesses {}, width {} in the file's units; {:.0} % of the area in slabs",
         num(height),
         num(thickness),
         num(width),
