@@ -346,9 +346,14 @@ fn products_whose_parts_carry_the_shape_are_not_reported_as_left_out() {
          #904=IFCPRODUCTDEFINITIONSHAPE($,$,(#903));\n\
          #900=IFCELEMENTASSEMBLY('AAAAAAAAAAAAAAAAAAAA9Z',$,'Roof',$,$,#143,#904,$,.NOTDEFINED.,.NOTDEFINED.);\n\
          #901=IFCRELAGGREGATES('AAAAAAAAAAAAAAAAAAAA9Y',$,$,$,#900,(#33,#44));\n\
-         #902=IFCBUILDINGELEMENTPROXY('AAAAAAAAAAAAAAAAAAAA9X',$,'Marker',$,$,$,$,$,$);",
+         #902=IFCBUILDINGELEMENTPROXY('AAAAAAAAAAAAAAAAAAAA9X',$,'Marker',$,$,$,$,$,$);\n\
+         #907=IFCSHAPEREPRESENTATION(#11,'Clearance','SweptSolid',(#138));\n\
+         #908=IFCPRODUCTDEFINITIONSHAPE($,$,(#907));\n\
+         #909=IFCBUILDINGELEMENTPROXY('AAAAAAAAAAAAAAAAAAAA9V',$,'Swing',$,$,#143,#908,$,$);",
     );
     assert!(m.warnings.is_empty(), "{:?}", m.warnings);
+    // A product whose only shape is a clearance draws nothing.
+    assert!(m.instances.iter().all(|i| i.name != "Swing"), "the clearance is drawn");
     // A body that meshes to nothing is still named: its shape was lost.
     let m = door_with(
         "#903=IFCSHAPEREPRESENTATION(#10,'Body','SweptSolid',());\n\
