@@ -22,8 +22,9 @@ pub fn write_obj(model: &Model, frame: &SourceFrame, obj: &Path) -> Result<()> {
     let mut out =
         std::io::BufWriter::new(std::fs::File::create(obj).map_err(|e| DataError::io(obj, e))?);
     let mut text = format!(
-        "# written by portico: {}\nmtllib {mtl_name}\n",
-        frame.describe()
+        "# written by portico in {}, {} up\nmtllib {mtl_name}\n",
+        frame.unit.name(),
+        frame.up.symbol().to_ascii_uppercase()
     );
     let mut base = 1usize;
     for (k, inst) in model.instances.iter().enumerate() {

@@ -148,6 +148,15 @@ fn the_house_in_centimetres_or_z_up_walks_like_the_house_in_metres() {
     };
     let wrong = build_model(import_file_with(&case("units/house-cm.obj"), &given).unwrap());
     assert_eq!(wrong.model.frames[0].unit_source, FrameSource::Given);
+    assert!(
+        wrong
+            .model
+            .warnings
+            .iter()
+            .any(|w| w.contains("is --units cm meant")),
+        "{:?}",
+        wrong.model.warnings
+    );
     let (s, _) = extent(&wrong.tour());
     assert!(
         s > 10.0 * secs,
@@ -353,7 +362,10 @@ fn products_whose_parts_carry_the_shape_are_not_reported_as_left_out() {
     );
     assert!(m.warnings.is_empty(), "{:?}", m.warnings);
     // A product whose only shape is a clearance draws nothing.
-    assert!(m.instances.iter().all(|i| i.name != "Swing"), "the clearance is drawn");
+    assert!(
+        m.instances.iter().all(|i| i.name != "Swing"),
+        "the clearance is drawn"
+    );
     // A body that meshes to nothing is still named: its shape was lost.
     let m = door_with(
         "#903=IFCSHAPEREPRESENTATION(#10,'Body','SweptSolid',());\n\

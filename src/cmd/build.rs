@@ -29,11 +29,11 @@ pub struct Args {
     output: PathBuf,
     /// The unit the models' coordinates are in, whatever their geometry or format says
     /// (default: the format's, or found from the geometry for OBJ).
-    #[arg(long, value_name = "UNIT", value_parser = values::unit())]
+    #[arg(long, value_name = "UNIT", value_parser = values::unit(), ignore_case = true)]
     units: Option<LengthUnit>,
     /// The axis pointing up in the models (default: the format's, or found from the geometry
     /// for OBJ).
-    #[arg(long, value_name = "AXIS", value_parser = values::up())]
+    #[arg(long, value_name = "AXIS", value_parser = values::up(), ignore_case = true)]
     up: Option<UpAxis>,
     /// Store every instance's geometry separately with baked lighting (large: the out-of-core case).
     #[arg(long)]

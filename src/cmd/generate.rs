@@ -31,10 +31,10 @@ pub struct Args {
     #[arg(long)]
     textured: bool,
     /// With an `.obj` output: the unit to write it in (default m).
-    #[arg(long, value_name = "UNIT", value_parser = values::unit())]
+    #[arg(long, value_name = "UNIT", value_parser = values::unit(), ignore_case = true)]
     units: Option<LengthUnit>,
     /// With an `.obj` output: the axis to write pointing up (default y).
-    #[arg(long, value_name = "AXIS", value_parser = values::up())]
+    #[arg(long, value_name = "AXIS", value_parser = values::up(), ignore_case = true)]
     up: Option<UpAxis>,
     /// Output file: `.glb`, or `.obj` (with its `.mtl`; untagged, without textures), in the
     /// unit and up axis given, as exporters write OBJ.
@@ -86,6 +86,11 @@ pub fn run(a: Args) -> Result<()> {
             ..SourceFrame::metres_y_up()
         };
         portico_data::export::write_obj(&model, &frame, &a.output)?;
+        eprintln!(
+            "wrote OBJ in {}, {} up",
+            frame.unit.name(),
+            frame.up.symbol().to_ascii_uppercase()
+        );
     } else {
         if a.units.is_some() || a.up.is_some() {
             anyhow::bail!(

@@ -24,7 +24,9 @@ const MAX_LOOKED: usize = 64;
 /// How the pieces touch along one axis.
 #[derive(Debug, Clone, Default)]
 pub(super) struct Contacts {
-    /// The share of the pieces asked (those not thin along the axis) whose lowest point lies
+    /// Pieces asked (those not thin along the axis).
+    pub(super) asked: usize,
+    /// The share of the pieces asked whose lowest point lies
     /// on another piece's highest, their boxes overlapping across it: resting on it, if the
     /// axis is up.
     pub(super) resting: f64,
@@ -102,6 +104,7 @@ pub(super) fn contacts(pieces: &[Piece], axis: usize) -> Contacts {
         }
     }
     Contacts {
+        asked,
         resting: if asked == 0 {
             0.0
         } else {
@@ -165,14 +168,28 @@ pub(super) fn unit_of(
     let mut ranked: Vec<(LengthUnit, f64)> =
         LengthUnit::ALL.iter().map(|&u| (u, score(u))).collect();
     ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
-    let num = |x: Option<f64>| x.map_or("none".to_string(), |v| format!("{}", round3(v)));
     let slab_share = if total > 0.0 { slabs / total } else { 0.0 };
+    let measures: Vec<String> = [
+        (measured, height),
+        ("thicknesses", thickness),
+        ("width", width),
+    ]
+    .into_iter()
+    .filter_map(|(what, v)| v.map(|v| format!("{what} {}", round3(v))))
+    .collect();
     let why = format!(
-        "{measured} {}, thicknesses {}, width {} in the file's units; {:.0} % of the area in slabs",
-        num(height),
-        num(thickness),
-        num(width),
-        100.0 * slab_share
+        "{} in the file's units; {:.0} % of the area in floors and slabs{}",
+        if measures.is_empty() {
+            "nothing measured".to_string()
+        } else {
+            measures.join(", ")
+        },
+        100.0 * slab_share,
+        if height.is_none() {
+            "; no storeys or walls found"
+        } else {
+            ""
+        }
     );
     let (best, best_score) = ranked[0];
     // Found only when the storey itself fits: the other cues cannot tell units 10× apart.

@@ -39,10 +39,14 @@ pub const UP_MARGIN: f64 = 1.25;
 /// furniture stand on its floors; a spider or an engine has no floors to say which way is up.
 pub const MIN_RESTING: f64 = 0.2;
 
+/// Pieces (not thin along the axis) that must be asked for the share to say anything: a cube
+/// of six faces is not a building standing on a floor.
+pub const MIN_ASKED: usize = 6;
+
 /// How much better (in log-plausibility: e-folds outside the storey, thickness and width ranges
 /// of `cues.rs`) the best unit must fit than the next. Neighbouring units differ by 2.54× (cm
 /// and in) or more, an e-fold of 0.93, of which the storey range's own width takes 0.55.
-pub const UNIT_MARGIN: f64 = 0.3;
+pub const UNIT_MARGIN: f64 = 0.45;
 
 /// The share of the area in slabs below which a model is not read as a building, and its unit
 /// not guessed from storeys and walls it does not have.
@@ -177,9 +181,10 @@ pub struct Evidence {
 pub fn evidence(pieces: &[Piece]) -> Evidence {
     let touching = [1, 2].map(|axis| contacts(pieces, axis));
     let resting = [touching[0].resting, touching[1].resting];
-    let up = if resting[1] > resting[0] * UP_MARGIN && resting[1] >= MIN_RESTING {
+    let enough = |c: &cues::Contacts| c.resting >= MIN_RESTING && c.asked >= MIN_ASKED;
+    let up = if resting[1] > resting[0] * UP_MARGIN && enough(&touching[1]) {
         Some(UpAxis::Z)
-    } else if resting[0] > resting[1] * UP_MARGIN && resting[0] >= MIN_RESTING {
+    } else if resting[0] > resting[1] * UP_MARGIN && enough(&touching[0]) {
         Some(UpAxis::Y)
     } else {
         None
@@ -199,7 +204,8 @@ pub fn evidence(pieces: &[Piece]) -> Evidence {
 /// Settles a file's frame: the options first, else the geometry's evidence when `detect`
 /// (OBJ, whose files carry neither), else `default` (what the format says). When the format
 /// fixes the frame (`detect` false), evidence that clearly disagrees comes back as a warning
-/// naming the options to give, and the format's frame is kept.
+/// naming the options to give, and the format's frame is kept; so does evidence that clearly
+/// disagrees with an option given (`--up z` on a Y-up building).
 pub fn settle(
     pieces: &[Piece],
     default: &SourceFrame,
@@ -208,15 +214,6 @@ pub fn settle(
 ) -> (SourceFrame, Vec<String>) {
     let mut frame = default.clone();
     let mut warnings = Vec::new();
-    if options.units.is_some() && options.up.is_some() {
-        frame.unit = options.units.unwrap_or(frame.unit);
-        frame.up = options.up.unwrap_or(frame.up);
-        frame.unit_source = FrameSource::Given;
-        frame.up_source = FrameSource::Given;
-        frame.unit_why.clear();
-        frame.up_why.clear();
-        return (frame, warnings);
-    }
     let ev = evidence(pieces);
     let up_why = format!(
         "pieces rest on others along {}: {:.0} % along Y, {:.0} % along Z",
@@ -232,6 +229,14 @@ pub fn settle(
             frame.up = u;
             frame.up_source = FrameSource::Given;
             frame.up_why.clear();
+            if let Some(seen) = ev.up.filter(|&seen| seen != u && ev.unit.is_some()) {
+                warnings.push(format!(
+                    "given --up {}, but the model looks {} up ({up_why}): is --up {} meant?",
+                    u.symbol(),
+                    seen.symbol().to_ascii_uppercase(),
+                    seen.symbol()
+                ));
+            }
         }
         None if detect => match ev.up {
             Some(u) => {
@@ -251,7 +256,9 @@ pub fn settle(
             }
         },
         None => {
-            if let Some(u) = ev.up.filter(|&u| u != frame.up) {
+            // Only a model that reads as a building with the other axis up (its unit found)
+            // is named: a test board or an engine has no floors to say so.
+            if let Some(u) = ev.up.filter(|&u| u != frame.up && ev.unit.is_some()) {
                 warnings.push(format!(
                     "the format says {} is up, but the model looks {} up ({up_why}): give --up {} \
                      if it is",
@@ -279,6 +286,15 @@ pub fn settle(
             frame.unit = u;
             frame.unit_source = FrameSource::Given;
             frame.unit_why.clear();
+            if let Some(seen) = unit.filter(|&seen| seen != u) {
+                warnings.push(format!(
+                    "given --units {}, but the model looks like {} ({unit_why}): is --units {} \
+                     meant?",
+                    u.symbol(),
+                    seen.name(),
+                    seen.symbol()
+                ));
+            }
         }
         None if detect => match unit {
             Some(u) => {
@@ -291,7 +307,7 @@ pub fn settle(
                 frame.unit_why = unit_why;
                 warnings.push(format!(
                     "the unit is not clear from the geometry ({}); assumed {}: give --units \
-                     m, cm, mm, in or ft if it is wrong",
+                     m, cm, mm, in, ft or dm if it is wrong",
                     frame.unit_why,
                     frame.unit.name()
                 ));
@@ -385,7 +401,14 @@ mod tests {
             (f.unit, f.up, f.unit_source),
             (LengthUnit::Foot, UpAxis::Z, FrameSource::Given)
         );
-        assert!(w.is_empty());
+        // Given as told, but a Y-up house given Z up is named.
+        assert!(w.iter().any(|w| w.contains("is --up y meant")), "{w:?}");
+        let right = FrameOptions {
+            units: Some(LengthUnit::Metre),
+            up: Some(UpAxis::Y),
+        };
+        let (_, w) = settle(&house(), &SourceFrame::metres_y_up(), true, &right);
+        assert!(w.is_empty(), "{w:?}");
         // One cube says nothing about storeys: assumed, with the option named.
         let cube = [boxed([0.0; 3], [1.0; 3])];
         let (f, w) = settle(

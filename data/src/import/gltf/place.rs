@@ -105,11 +105,8 @@ impl Importer<'_> {
 
     /// The connected parts of the placed definitions ([`frame::pieces_of`]), each definition
     /// cut once; instances evenly spread, at most [`frame::MAX_SAMPLED`] of them and
-    /// [`MAX_PIECES`] pieces in all. None when the user gave both unit and up axis.
+    /// [`MAX_PIECES`] pieces in all.
     fn pieces(&self, placed: &[Placed]) -> Vec<Piece> {
-        if self.options.units.is_some() && self.options.up.is_some() {
-            return Vec::new();
-        }
         let mut own: HashMap<u32, Vec<Piece>> = HashMap::new();
         let stride = placed.len().div_ceil(frame::MAX_SAMPLED).max(1);
         let sampled: Vec<&Placed> = placed.iter().step_by(stride).collect();

@@ -330,16 +330,14 @@ fn settle_frame(
         up_source: FrameSource::Format,
         up_why: "IFC".into(),
     };
-    // The geometry in the file's own numbers, for the evidence (none needed when both are
-    // given).
-    let mut pieces: Vec<Piece> = Vec::new();
-    if options.units.is_none() || options.up.is_none() {
-        let to_file = (UpAxis::Z.to_y_up() * DMat4::from_scale(DVec3::splat(unit_scale))).inverse();
-        let stride = parts.len().div_ceil(super::frame::MAX_SAMPLED).max(1);
-        for p in parts.iter().step_by(stride) {
-            pieces.extend(pieces_of(&p.positions, &p.indices, &to_file));
-        }
-    }
+    // The geometry in the file's own numbers, for the evidence.
+    let to_file = (UpAxis::Z.to_y_up() * DMat4::from_scale(DVec3::splat(unit_scale))).inverse();
+    let stride = parts.len().div_ceil(super::frame::MAX_SAMPLED).max(1);
+    let pieces: Vec<Piece> = parts
+        .iter()
+        .step_by(stride)
+        .flat_map(|p| pieces_of(&p.positions, &p.indices, &to_file))
+        .collect();
     let (frame, said) = settle(&pieces, &file, false, options);
     warnings.extend(said);
     let kernel_y_up = UpAxis::Z.to_y_up();
