@@ -1,6 +1,7 @@
-//! Writing a model as Wavefront OBJ + MTL (each file written whole, then renamed into place) in any unit and up axis, as SketchUp, 3ds Max or
+//! Writing a model as Wavefront OBJ + MTL in any unit and up axis, as SketchUp, 3ds Max or
 //! Revit would: the way to test the importers' frame detection ([`crate::import::frame`]) on
-//! buildings of any size (`portico generate --units cm --up z -o building.obj`).
+//! buildings of any size (`portico generate --units cm --up z -o building.obj`). Each file is
+//! written whole beside its name, then renamed into place.
 
 use crate::error::{DataError, Result};
 use crate::frame::SourceFrame;
@@ -19,8 +20,12 @@ pub fn write_obj(model: &Model, frame: &SourceFrame, obj: &Path) -> Result<()> {
     let to_file = frame.to_metres_y_up().inverse();
     let turn = to_file.to_scale_rotation_translation().1;
     let origin = DVec3::from(model.origin);
-    let mut out =
-        std::io::BufWriter::new(std::fs::File::create(obj).map_err(|e| DataError::io(obj, e))?);
+    let dir = obj
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| DataError::io(dir, e))?;
+    let mut out = std::io::BufWriter::new(tmp);
     let mut text = format!(
         "# written by portico in {}, {} up\nmtllib {mtl_name}\n",
         frame.unit.name(),
@@ -71,6 +76,9 @@ pub fn write_obj(model: &Model, frame: &SourceFrame, obj: &Path) -> Result<()> {
     out.write_all(text.as_bytes())
         .and_then(|_| out.flush())
         .map_err(|e| DataError::io(obj, e))?;
+    let tmp = out
+        .into_inner()
+        .map_err(|e| DataError::io(obj, e.into_error()))?;
     let mut lib = String::new();
     for (i, m) in model.materials.iter().enumerate() {
         let [r, g, b, a] = m.base_color;
@@ -78,7 +86,31 @@ pub fn write_obj(model: &Model, frame: &SourceFrame, obj: &Path) -> Result<()> {
             "newmtl m{i}\nKd {r:.4} {g:.4} {b:.4}\nd {a:.4}\n\n"
         ));
     }
-    std::fs::write(&mtl, lib).map_err(|e| DataError::io(&mtl, e))
+    // The library first, then the model that names it; both readable by other tools and
+    // users, as any model file (a temporary file is private).
+    let mut lib_tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| DataError::io(dir, e))?;
+    lib_tmp
+        .write_all(lib.as_bytes())
+        .map_err(|e| DataError::io(&mtl, e))?;
+    readable(lib_tmp.as_file()).map_err(|e| DataError::io(&mtl, e))?;
+    lib_tmp
+        .persist(&mtl)
+        .map_err(|e| DataError::io(&mtl, e.error))?;
+    readable(tmp.as_file()).map_err(|e| DataError::io(obj, e))?;
+    tmp.persist(obj).map_err(|e| DataError::io(obj, e.error))?;
+    Ok(())
+}
+
+/// Makes a file world-readable (0644) where permissions exist.
+fn readable(file: &std::fs::File) -> std::io::Result<()> {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        file.set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    }
+    #[cfg(not(unix))]
+    let _ = file;
+    Ok(())
 }
 
 /// A name OBJ can carry on one line without spaces.
