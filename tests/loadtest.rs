@@ -413,11 +413,17 @@ fn the_default_prefetch_reads_little_more_than_the_oracle_and_skips_no_more() {
         p.objects_skipped_mean,
         o.objects_skipped_mean
     );
+    // LODs skipped move with the machine's load (the clients run in real time): over five
+    // full runs on 2 cores (2026-12-06) the default skipped 0.09-0.12, the oracle 0.02-0.16 and
+    // the range lookahead 0.17-0.24, and +0.05 on the oracle failed two of them. The default
+    // must stay near the oracle and clearly under the range lookahead it replaced.
     assert!(
-        p.lods_skipped_mean <= o.lods_skipped_mean + 0.05,
-        "LODs skipped {} vs the oracle's {}",
+        p.lods_skipped_mean <= o.lods_skipped_mean + 0.1
+            && p.lods_skipped_mean < r.lods_skipped_mean,
+        "LODs skipped {} vs the oracle's {} and the range lookahead's {}",
         p.lods_skipped_mean,
-        o.lods_skipped_mean
+        o.lods_skipped_mean,
+        r.lods_skipped_mean
     );
 }
 
