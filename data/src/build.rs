@@ -331,6 +331,7 @@ fn paint_items<'a>(
                 color,
                 texture,
                 alpha: material.map_or(Default::default(), |m| m.alpha),
+                surface: material.map_or(Default::default(), |m| m.surface()),
             })
         })
         .collect()
@@ -343,12 +344,13 @@ fn material_colors(scene: &Scene<'_>, under: &[u32]) -> [[f32; 4]; 6] {
         let r = &scene.records[i as usize];
         let s = r.bounds.size();
         let area = s.x * s.y + s.y * s.z + s.x * s.z;
-        let c = scene
+        let (c, e) = scene
             .materials
             .get(r.material as usize)
-            .map_or([1.0; 4], |m| m.base_color);
+            .map_or(([1.0; 4], [0.0; 3]), |m| (m.base_color, m.emissive));
         for k in 0..3 {
-            sum[k] += c[k] * area;
+            // What an unlit viewer sees: the base colour and the light given off.
+            sum[k] += (c[k] + e[k]).min(1.0) * area;
         }
         sum[3] += area;
     }
@@ -521,8 +523,8 @@ fn write_lod(w: &mut DbWriter, l: &LodMesh, bytes: Vec<u8>, error: f32) -> Resul
     })
 }
 
-/// Writes each texture's mip chain as segments, coarsest first ([`crate::texture`]), and
-/// returns their header records.
+/// Writes each texture's mip chain as coded segments, coarsest first ([`crate::texture`]:
+/// PNG, or JPEG within [`texture::MIN_PSNR`]), and returns their header records.
 fn write_textures(
     w: &mut DbWriter,
     textures: &[TextureImage],
@@ -536,14 +538,16 @@ fn write_textures(
         .iter()
         .map(|t| {
             let chain = texture::mip_chain(t.width, t.height, &t.rgba);
-            let segments = texture::cut_segments(t.width, t.height, &chain)
+            let coded = texture::code_segments(t.width, t.height, &chain);
+            let psnr = coded.iter().map(|c| c.psnr).fold(f64::INFINITY, f64::min);
+            let segments = coded
                 .into_iter()
-                .map(|(width, height, levels, bytes)| {
+                .map(|c| {
                     Ok(MipSegment {
-                        segment: w.add_segment(SegmentKind::Mips, &bytes)?,
-                        width,
-                        height,
-                        levels,
+                        segment: w.add_segment(SegmentKind::Mips, &c.bytes)?,
+                        width: c.width,
+                        height: c.height,
+                        levels: c.levels,
                     })
                 })
                 .collect::<Result<Vec<_>>>()?;
@@ -555,6 +559,7 @@ fn write_textures(
                 segments,
                 average: texture::average_color(&t.rgba),
                 wrap: t.wrap,
+                psnr: psnr.is_finite().then_some(psnr as f32),
             })
         })
         .collect()

@@ -95,6 +95,8 @@ pub struct PaintItem<'a> {
     pub texture: Option<(u32, &'a crate::texture::TextureImage)>,
     /// How the material's alpha is used.
     pub alpha: crate::texture::AlphaMode,
+    /// The material's emissive colour, lighting and sides.
+    pub surface: crate::model::Surface,
 }
 
 /// Paints impostor textures at build time (Maciel §5.2.2: orthographic captures of the real

@@ -8,7 +8,8 @@ use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
 /// A surface material: its colour (already multiplied into the vertex colours by the
-/// importers), its base-colour texture and how its alpha is used.
+/// importers), its texture and what the texture colours, the light it gives off, how its alpha
+/// is used and which of its sides are drawn (glTF 2.0 §3.9; MTL's `Kd`, `Ke`, `d`/`Tr`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Material {
     /// Name from the source file.
@@ -17,11 +18,80 @@ pub struct Material {
     /// not apply it again; build-time stand-ins without vertices (cluster colour boxes drawn
     /// without a painter) use it.
     pub base_color: [f32; 4],
-    /// The base-colour texture: an index into [`Model::textures`] (in a database, into
-    /// [`crate::format::Header::textures`]), multiplied with the vertex colour.
+    /// The material's texture: an index into [`Model::textures`] (in a database, into
+    /// [`crate::format::Header::textures`]); [`Material::texture_role`] says what it colours.
     pub texture: Option<u32>,
+    /// What the texture multiplies: the base colour (as glTF's `baseColorTexture`), the
+    /// emissive colour (`emissiveTexture`: baked lighting), or both (one image in both slots).
+    pub texture_role: TextureRole,
+    /// Light the surface gives off, added to the shaded colour (linear RGB: glTF's
+    /// `emissiveFactor` × `KHR_materials_emissive_strength`, MTL's `Ke`); black for none.
+    pub emissive: [f32; 3],
+    /// Drawn without lighting: the colour as it is (glTF's `KHR_materials_unlit`; baked scans).
+    pub unlit: bool,
+    /// Both sides drawn (and lit). `false` (glTF's default, `doubleSided: false`) culls the
+    /// faces seen from behind, so a coincident reversed copy (SketchUp's back faces) never
+    /// shows through. OBJ and IFC say nothing of sides: their materials are two-sided.
+    pub double_sided: bool,
     /// How alpha is used (opaque, cut out, blended).
     pub alpha: AlphaMode,
+}
+
+/// What a material's texture colours ([`Material::texture_role`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum TextureRole {
+    /// The base colour (lit).
+    #[default]
+    Base,
+    /// The emissive colour (added after lighting).
+    Emissive,
+    /// Both: the same image is the base colour and the emissive colour.
+    Both,
+}
+
+impl TextureRole {
+    /// Whether the texture multiplies the base colour.
+    pub fn base(self) -> bool {
+        self != TextureRole::Emissive
+    }
+
+    /// Whether the texture multiplies the emissive colour.
+    pub fn emissive(self) -> bool {
+        self != TextureRole::Base
+    }
+}
+
+/// What a renderer needs of a material beside its colour, texture and alpha: what the texture
+/// colours, the light given off, whether it is lit and which sides are drawn.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Surface {
+    /// [`Material::texture_role`].
+    pub texture_role: TextureRole,
+    /// [`Material::emissive`] (linear RGB).
+    pub emissive: [f32; 3],
+    /// [`Material::unlit`].
+    pub unlit: bool,
+    /// [`Material::double_sided`].
+    pub double_sided: bool,
+}
+
+impl Default for Surface {
+    /// A lit, two-sided surface whose texture is its base colour, giving off no light.
+    fn default() -> Self {
+        Material::default().surface()
+    }
+}
+
+impl Material {
+    /// The material's [`Surface`].
+    pub fn surface(&self) -> Surface {
+        Surface {
+            texture_role: self.texture_role,
+            emissive: self.emissive,
+            unlit: self.unlit,
+            double_sided: self.double_sided,
+        }
+    }
 }
 
 impl Default for Material {
@@ -30,6 +100,10 @@ impl Default for Material {
             name: "default".into(),
             base_color: [1.0; 4],
             texture: None,
+            texture_role: TextureRole::Base,
+            emissive: [0.0; 3],
+            unlit: false,
+            double_sided: true,
             alpha: AlphaMode::Opaque,
         }
     }

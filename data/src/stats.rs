@@ -82,11 +82,16 @@ pub struct DbStats {
     pub texture_bytes: u64,
     /// Material textures.
     pub textures: u64,
-    /// Bytes of the material textures' mip segments (RGBA8; every segment a whole chain).
+    /// Bytes of the material textures' mip segments as stored and sent (coded: PNG or JPEG).
     pub mip_bytes: u64,
+    /// What those segments give decoded (RGBA8; every segment a whole chain).
+    pub mip_texel_bytes: u64,
     /// Bytes of the material textures' coarse segments: what a first view of every textured
     /// object costs.
     pub coarse_mip_bytes: u64,
+    /// The lowest PSNR (dB) of any coded texture segment against its texels; `None` when all
+    /// are lossless.
+    pub texture_psnr: Option<f32>,
 }
 
 /// Computes the statistics of an open database (header only; no segment is read).
@@ -166,12 +171,24 @@ pub fn stats(db: &Database) -> DbStats {
         texture_bytes: kind_bytes(SegmentKind::Texture),
         textures: h.textures.len() as u64,
         mip_bytes: kind_bytes(SegmentKind::Mips),
+        mip_texel_bytes: h
+            .textures
+            .iter()
+            .flat_map(|t| &t.segments)
+            .map(|s| s.texel_bytes())
+            .sum(),
         coarse_mip_bytes: h
             .textures
             .iter()
             .filter_map(|t| t.segments.first())
-            .map(|s| s.bytes())
+            .filter_map(|s| db.segments().get(s.segment as usize))
+            .map(|e| e.length)
             .sum(),
+        texture_psnr: h
+            .textures
+            .iter()
+            .filter_map(|t| t.psnr)
+            .min_by(f32::total_cmp),
         name: h.name.clone(),
         format_version: db.prologue().version,
         flattened: h.flattened,
@@ -314,11 +331,13 @@ impl DbStats {
         }
         if self.textures > 0 {
             s.push_str(&format!(
-                "\n  textures {}: {:.1} MB of mip segments ({:.0} % of the file), {:.2} MB of them coarse\n",
+                "\n  textures {}: {:.1} MB of mip segments ({:.0} % of the file; {:.1} MB decoded), {:.2} MB of them coarse, {}\n",
                 self.textures,
                 self.mip_bytes as f64 / 1e6,
                 100.0 * self.mip_bytes as f64 / self.file_bytes.max(1) as f64,
+                self.mip_texel_bytes as f64 / 1e6,
                 self.coarse_mip_bytes as f64 / 1e6,
+                self.texture_psnr.map_or("all lossless".to_string(), |p| format!("PSNR at least {p:.1} dB")),
             ));
         }
         if self.clusters > 0 {

@@ -65,8 +65,12 @@ fn model() -> Model {
             Material {
                 name: "red".into(),
                 base_color: [1.0, 0.0, 0.0, 1.0],
-                texture: None,
-                alpha: Default::default(),
+                // Every material field goes through the file (format 6 added the last four).
+                emissive: [0.1, 0.2, 0.3],
+                unlit: true,
+                double_sided: false,
+                texture_role: portico_data::model::TextureRole::Emissive,
+                ..Material::default()
             },
         ],
         defs: vec![
@@ -119,6 +123,7 @@ fn round_trip_preserves_instancing_lods_and_every_segment() {
     let db = Database::open(&path).expect("open");
     db.verify_all().expect("checksums");
     let h = db.header();
+    assert_eq!(h.materials, model().materials);
     assert_eq!(h.objects.len(), 2);
     assert_eq!(h.instances.len(), 5);
     assert!(

@@ -6,7 +6,7 @@ use portico_data::Database;
 use portico_data::build::{BuildOptions, Quiet, build};
 use portico_data::format::SegmentKind;
 use portico_data::import::import_file;
-use portico_data::texture::{TextureView, Wrap};
+use portico_data::texture::{Wrap, decode_segment};
 use std::path::{Path, PathBuf};
 
 mod common;
@@ -69,7 +69,9 @@ fn a_missing_image_is_a_warning_and_the_box_keeps_its_colour() {
     assert!(!m.defs[0].lods[0].has_uvs());
     assert_eq!(m.warnings.len(), 1, "{:?}", m.warnings);
     assert!(
-        m.warnings[0].contains("CesiumLogoFlat.png") && m.warnings[0].contains("base colour"),
+        m.warnings[0].contains("CesiumLogoFlat.png")
+            && m.warnings[0].contains("not found")
+            && m.warnings[0].contains("drawn in its colour"),
         "{}",
         m.warnings[0]
     );
@@ -133,16 +135,19 @@ fn a_built_database_holds_each_texture_coarse_first_as_whole_mip_chains() {
         let entry = db.segments()[s.segment as usize];
         assert_eq!(SegmentKind::from_u16(entry.kind), Some(SegmentKind::Mips));
         let bytes = db.segment(s.segment).unwrap();
-        let v = TextureView::parse(&bytes).unwrap();
+        let v = decode_segment(&bytes).unwrap();
         assert_eq!((v.width, v.levels), (s.width, s.levels));
-        assert_eq!(bytes.len() as u64, s.bytes());
+        assert_eq!(v.texels.len() as u64, s.texel_bytes());
+        // Coded: far fewer bytes than the texels they give.
+        assert!(
+            bytes.len() as u64 * 2 < s.texel_bytes(),
+            "{} bytes",
+            bytes.len()
+        );
     }
     // The coarse segment is small: what arrives with the first geometry.
-    assert!(
-        t.segments[0].bytes() < 16 * 1024,
-        "{}",
-        t.segments[0].bytes()
-    );
+    let coarse = db.segment(t.segments[0].segment).unwrap().len();
+    assert!(coarse < 8 * 1024, "{coarse}");
     let lods = &h.objects[0].lods;
     assert!(lods[0].uv, "the finest LOD carries coordinates");
     assert!(h.objects[0].uv_span > 0.5);
@@ -187,7 +192,11 @@ fn prefetch_brings_coarse_mips_with_the_geometry_that_needs_them() {
             mips_seen += 1;
             let (t, k) = texture_of_segment(item.segment).expect("a texture's segment");
             assert_eq!(item.lod as usize, k, "the item names its level");
-            assert_eq!(item.bytes, h.textures[t].segments[k].bytes());
+            // What the segment weighs on the wire: its coded size.
+            assert_eq!(
+                item.bytes,
+                p.database().segments()[item.segment as usize].length
+            );
             // The first segment of each texture listed is its coarse one.
             let first = *first_at.entry(t).or_insert((i, k));
             assert_eq!(

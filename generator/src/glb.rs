@@ -125,6 +125,10 @@ struct Material {
     name: &'static str,
     #[serde(rename = "pbrMetallicRoughness")]
     pbr: Pbr,
+    /// Both sides drawn: the generator's thin parts (door panels, shelves, signs) are seen
+    /// from either side, and nothing here promises a winding.
+    #[serde(rename = "doubleSided")]
+    double_sided: bool,
 }
 
 #[derive(Serialize)]
@@ -342,6 +346,7 @@ pub(crate) fn write(scene: &Scene) -> Result<Vec<u8>, GenerateError> {
                 metallic_factor: 0.0,
                 roughness_factor: 0.9,
             },
+            double_sided: true,
         }],
         accessors: std::mem::take(&mut bin.accessors),
         buffer_views: std::mem::take(&mut bin.views),

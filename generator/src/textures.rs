@@ -200,7 +200,8 @@ pub fn with_textures(glb: &[u8]) -> Result<Vec<u8>, GenerateError> {
                     "baseColorTexture": {"index": texture},
                     "metallicFactor": 0.0,
                     "roughnessFactor": 0.9
-                }
+                },
+                "doubleSided": true
             }),
         );
         debug_assert_eq!(

@@ -56,6 +56,7 @@ impl Painter {
                     color: it.color,
                     texture: it.texture.and_then(|(t, _)| self.textures.get(&t)),
                     alpha: it.alpha,
+                    surface: it.surface,
                 })
             })
             .collect();

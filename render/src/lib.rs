@@ -35,6 +35,7 @@ pub use calibrate::calibrate;
 pub use material::GpuTexture;
 pub use mesh::{GpuMesh, Uploader};
 pub use portico_client::view::Camera;
+pub use portico_data::model::{Surface, TextureRole};
 pub use portico_data::texture::AlphaMode;
 pub use renderer::Renderer;
 pub use textured::GpuImpostor;
@@ -126,6 +127,11 @@ pub struct Draw<'a> {
     /// How alpha is used: opaque, cut out at a cutoff (textured draws) or blended (drawn after
     /// every opaque draw, in the order given, without writing depth).
     pub alpha: AlphaMode,
+    /// What the texture colours, the light given off (added after lighting: a texture that is
+    /// emissive and not resident adds `color`'s share instead), whether it is lit, and whether
+    /// faces seen from behind are drawn (a single-sided surface culls them; a transform that
+    /// mirrors turns which side is the front, as glTF §3.7.4 says).
+    pub surface: Surface,
 }
 
 impl<'a> Draw<'a> {
@@ -137,6 +143,7 @@ impl<'a> Draw<'a> {
             color,
             texture: None,
             alpha: AlphaMode::Opaque,
+            surface: Surface::default(),
         }
     }
 
@@ -150,15 +157,14 @@ impl<'a> Draw<'a> {
         texture: impl Fn(u32) -> Option<&'a GpuTexture>,
     ) -> Draw<'a> {
         let inst = header.instances.get(drawn.instance as usize);
-        let alpha = inst
-            .and_then(|i| header.materials.get(i.material as usize))
-            .map_or(AlphaMode::Opaque, |m| m.alpha);
+        let material = inst.and_then(|i| header.materials.get(i.material as usize));
         Draw {
             mesh,
             transform: inst.map_or(Mat4::IDENTITY, |i| Mat4::from_cols_array(&i.transform)),
             color: drawn.tint,
             texture: drawn.texture.and_then(texture),
-            alpha,
+            alpha: material.map_or(AlphaMode::Opaque, |m| m.alpha),
+            surface: material.map_or(Surface::default(), |m| m.surface()),
         }
     }
 

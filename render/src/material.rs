@@ -5,7 +5,7 @@
 
 use crate::pipeline::{Blending, surface_pipeline, vertex_layouts};
 use crate::{RenderError, extent};
-use portico_data::texture::{TextureView, Wrap};
+use portico_data::texture::{Wrap, decode_segment};
 use wgpu::util::DeviceExt;
 
 /// One texture segment on the GPU (a mip chain from its finest level down), with the bind
@@ -95,8 +95,8 @@ impl Materials {
         }
     }
 
-    /// Uploads a texture segment (its whole mip chain, in one texture) to be sampled with
-    /// `wrap`, charged to `held`.
+    /// Decodes a texture segment (raw, PNG or JPEG: [`decode_segment`]) and uploads its whole
+    /// mip chain, in one texture, to be sampled with `wrap`, charged to `held`.
     pub(crate) fn upload(
         &self,
         device: &wgpu::Device,
@@ -105,7 +105,8 @@ impl Materials {
         segment: &[u8],
         wrap: [Wrap; 2],
     ) -> Result<GpuTexture, RenderError> {
-        let view = TextureView::parse(segment).map_err(RenderError::Texture)?;
+        // Decoded here, where the segment arrives (the client's IO stage, native and browser).
+        let view = decode_segment(segment).map_err(RenderError::Texture)?;
         let max = device.limits().max_texture_dimension_2d;
         if view.width > max || view.height > max {
             return Err(RenderError::Texture(format!(
@@ -126,7 +127,7 @@ impl Materials {
                 view_formats: &[],
             },
             wgpu::util::TextureDataOrder::MipMajor,
-            view.texels,
+            &view.texels,
         );
         let address = |w: Wrap| match w {
             Wrap::Repeat => wgpu::AddressMode::Repeat,

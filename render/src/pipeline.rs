@@ -13,15 +13,49 @@ pub(crate) struct Globals {
     pub(crate) ambient: [f32; 4],
 }
 
-/// Per-draw instance attributes (locations 3..=8); 96 bytes.
+/// Per-draw instance attributes (locations 3..=8 and 10); 112 bytes.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Pod, Zeroable)]
 pub(crate) struct InstanceData {
     pub(crate) model: [[f32; 4]; 4],
     pub(crate) color: [f32; 4],
-    /// x: alpha cutoff of a cut-out material (0: none); y: 1 for a blended material; z, w:
-    /// zero.
+    /// x: alpha cutoff of a cut-out material (0: none); y: 1 for a blended material; z: the
+    /// surface's [`flags`]; w: zero.
     pub(crate) params: [f32; 4],
+    /// The light the surface gives off (linear RGB; w zero).
+    pub(crate) emissive: [f32; 4],
+}
+
+/// `shader.wgsl`'s surface flags: drawn unlit.
+pub(crate) const UNLIT: u32 = 1;
+/// Faces seen from behind are discarded.
+pub(crate) const CULL_BACK: u32 = 2;
+/// The transform mirrors: the winding's front is the other side.
+pub(crate) const MIRRORED: u32 = 4;
+/// The texture (or, not resident, the colour passed) multiplies the base colour.
+pub(crate) const TEXTURE_BASE: u32 = 8;
+/// The texture (or, not resident, the colour passed) multiplies the emissive colour.
+pub(crate) const TEXTURE_EMISSIVE: u32 = 16;
+
+/// A surface's flags for `shader.wgsl` under `transform`.
+pub(crate) fn flags(surface: &crate::Surface, transform: &glam::Mat4) -> u32 {
+    let mut f = 0;
+    if surface.unlit {
+        f |= UNLIT;
+    }
+    if !surface.double_sided {
+        f |= CULL_BACK;
+    }
+    if transform.determinant() < 0.0 {
+        f |= MIRRORED;
+    }
+    if surface.texture_role.base() {
+        f |= TEXTURE_BASE;
+    }
+    if surface.texture_role.emissive() {
+        f |= TEXTURE_EMISSIVE;
+    }
+    f
 }
 
 /// The offscreen targets and the buffer frames are read back through: frames are drawn into
@@ -123,9 +157,9 @@ pub(crate) fn globals_layout(device: &wgpu::Device) -> wgpu::BindGroupLayout {
 
 pub(crate) const VERTEX_ATTRIBUTES: [wgpu::VertexAttribute; 3] =
     wgpu::vertex_attr_array![0 => Float32x3, 1 => Snorm8x4, 2 => Unorm8x4];
-pub(crate) const INSTANCE_ATTRIBUTES: [wgpu::VertexAttribute; 6] = wgpu::vertex_attr_array![
+pub(crate) const INSTANCE_ATTRIBUTES: [wgpu::VertexAttribute; 7] = wgpu::vertex_attr_array![
     3 => Float32x4, 4 => Float32x4, 5 => Float32x4, 6 => Float32x4, 7 => Float32x4,
-    8 => Float32x4
+    8 => Float32x4, 10 => Float32x4
 ];
 /// A textured mesh's coordinates (vertex buffer 2).
 pub(crate) const UV_ATTRIBUTES: [wgpu::VertexAttribute; 1] =

@@ -454,7 +454,13 @@ impl Renderer {
                     } else {
                         0.0
                     },
+                    crate::pipeline::flags(&d.surface, &d.transform) as f32,
                     0.0,
+                ],
+                emissive: [
+                    d.surface.emissive[0],
+                    d.surface.emissive[1],
+                    d.surface.emissive[2],
                     0.0,
                 ],
             })

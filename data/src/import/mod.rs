@@ -7,6 +7,7 @@
 //! Neither can panic on a file: bad input is one error line naming the file and the element
 //! (mesh, primitive, accessor, node, or OBJ line).
 
+pub mod files;
 pub mod frame;
 pub mod gltf;
 pub mod ifc;

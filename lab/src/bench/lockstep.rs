@@ -248,13 +248,14 @@ impl<'a> Bench<'a> {
                 let mesh = scene
                     .meshes
                     .get(&scene.segment(o.instance, o.lod as usize)?)?;
-                let (_, _, alpha) = scene.material(o.instance, o.lod as usize);
+                let (_, _, alpha, surface) = scene.material(o.instance, o.lod as usize);
                 Some(Draw {
                     mesh,
                     transform: scene.transforms[o.instance as usize],
                     color: o.tint,
                     texture: o.texture.and_then(|s| scene.textures.get(&s)),
                     alpha,
+                    surface,
                 })
             })
             .collect();
@@ -307,13 +308,14 @@ impl<'a> Bench<'a> {
             .iter()
             .filter_map(|&(o, l)| {
                 let mesh = scene.meshes.get(&scene.segment(o, l)?)?;
-                let (texture, color, alpha) = scene.material(o, l);
+                let (texture, color, alpha, surface) = scene.material(o, l);
                 Some(Draw {
                     mesh,
                     transform: scene.transforms[o as usize],
                     color,
                     texture,
                     alpha,
+                    surface,
                 })
             })
             .collect()

@@ -12,7 +12,7 @@ use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::{Header, LodRecord};
 use portico_data::geometry::{Aabb, GeometryView, encode_geometry};
 use portico_data::hierarchy::colour_box;
-use portico_render::{AlphaMode, GpuImpostor, GpuMesh, GpuTexture, Renderer};
+use portico_render::{AlphaMode, GpuImpostor, GpuMesh, GpuTexture, Renderer, Surface};
 use std::collections::HashMap;
 use std::collections::hash_map::Entry;
 use std::path::Path;
@@ -167,18 +167,26 @@ impl Scene {
         Ok(())
     }
 
-    /// The texture, tint and alpha mode instance `i`'s LOD `lod` is drawn with when everything
+    /// The texture, tint, alpha mode and surface instance `i`'s LOD `lod` is drawn with when everything
     /// is resident (the client's rule, [`portico_client::frame::material_of`]).
-    pub fn material(&self, i: u32, lod: usize) -> (Option<&GpuTexture>, [f32; 4], AlphaMode) {
+    pub fn material(
+        &self,
+        i: u32,
+        lod: usize,
+    ) -> (Option<&GpuTexture>, [f32; 4], AlphaMode, Surface) {
         let (segment, tint) =
             material_of(&self.header, i, lod, &|s| self.textures.contains_key(&s));
-        let alpha = self
+        let material = self
             .header
             .instances
             .get(i as usize)
-            .and_then(|inst| self.header.materials.get(inst.material as usize))
-            .map_or(AlphaMode::Opaque, |m| m.alpha);
-        (segment.and_then(|s| self.textures.get(&s)), tint, alpha)
+            .and_then(|inst| self.header.materials.get(inst.material as usize));
+        (
+            segment.and_then(|s| self.textures.get(&s)),
+            tint,
+            material.map_or(AlphaMode::Opaque, |m| m.alpha),
+            material.map_or(Surface::default(), |m| m.surface()),
+        )
     }
 
     /// Uploads every cluster's average-colour box and textured box.

@@ -24,12 +24,14 @@ pub struct Buffers(Vec<Option<Vec<u8>>>);
 impl Buffers {
     /// Loads every buffer of `root`. `base` is the directory external URIs are relative to
     /// (`None`: external files are refused, as for bytes that came from no file); `blob` is the
-    /// GLB's BIN chunk.
+    /// GLB's BIN chunk. A URI found only with `\` read as `/` or without regard to case
+    /// ([`crate::import::files::find`]) adds a warning.
     pub fn load(
         root: &json::Root,
         raw: &Value,
         base: Option<&Path>,
         mut blob: Option<Vec<u8>>,
+        warnings: &mut Vec<String>,
     ) -> Result<Buffers, String> {
         let mut out = Vec::with_capacity(root.buffers.len());
         for (i, b) in root.buffers.iter().enumerate() {
@@ -51,10 +53,12 @@ impl Buffers {
                     };
                     let name = urlencoding::decode(uri)
                         .map_err(|_| format!("buffer {i}: URI '{uri}' is not valid UTF-8"))?;
-                    let file = dir.join(name.as_ref());
+                    let found = crate::import::files::find(dir, &name)
+                        .map_err(|e| format!("buffer {i}: {e}"))?;
+                    warnings.extend(found.warning.map(|w| format!("buffer {i}: {w}")));
                     Some(
-                        std::fs::read(&file)
-                            .map_err(|e| format!("buffer {i}: {}: {e}", file.display()))?,
+                        std::fs::read(&found.path)
+                            .map_err(|e| format!("buffer {i}: {}: {e}", found.path.display()))?,
                     )
                 }
                 None if i == 0 && blob.is_some() => blob.take(),

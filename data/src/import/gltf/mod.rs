@@ -15,10 +15,12 @@
 //!   in f64; the model moves to a local origin ([`crate::bulk::local_origin`]) kept in
 //!   [`Model::origin`]; objects far from the bulk are named in a warning.
 //! - Node `extras`: `occluder: true` marks structural occluders; every other scalar is a tag.
-//! - Vertex colour = `COLOR_0` × the primitive's base colour factor; the base-colour texture
-//!   (PNG or JPEG, with its sampler's wrap modes and `KHR_texture_transform` baked into the
-//!   coordinates) and the alpha mode go to the material (`material`). Primitives of one mesh
-//!   with different textures become separate objects: an object draws with one texture.
+//! - Vertex colour = `COLOR_0` × the primitive's base colour factor; the texture (any format
+//!   the `image` crate reads, WebP from `EXT_texture_webp`; its sampler's wrap modes and
+//!   `KHR_texture_transform` baked into the coordinates, less each primitive's whole-number
+//!   offset), emissive colour, unlit, sides and alpha mode go to the material (`material`).
+//!   Primitives of one mesh with different textures become separate objects: an object draws
+//!   with one texture.
 
 mod accessor;
 mod buffers;
@@ -49,6 +51,18 @@ const DECODED: &[&str] = &[
     "KHR_mesh_quantization",
     buffers::MESHOPT,
     "KHR_texture_transform",
+    "EXT_texture_webp",
+    "KHR_materials_unlit",
+    "KHR_materials_emissive_strength",
+];
+
+/// Extensions a texture may hold its image in: with one of them a texture needs no `source`
+/// (each texture says what it lacks, `material`).
+const IMAGE_EXTENSIONS: &[&str] = &[
+    "KHR_texture_basisu",
+    "EXT_texture_webp",
+    "EXT_texture_avif",
+    "MSFT_texture_dds",
 ];
 
 /// Imports a `.gltf` (with external or embedded buffers) or `.glb` file. Errors name the file
@@ -96,7 +110,7 @@ pub fn import_slice(
     }
     let root: json::Root = serde_json::from_slice(&json_bytes).map_err(|e| format!("glTF: {e}"))?;
     let mut warnings = check(&root)?;
-    let buffers = Buffers::load(&root, &raw, base, blob)?;
+    let buffers = Buffers::load(&root, &raw, base, blob, &mut warnings)?;
     let views = Views::new(&root, &raw, buffers);
     let quantization = root
         .extensions_used
@@ -158,8 +172,10 @@ fn check(root: &json::Root) -> Result<Vec<String>, String> {
         // Required extensions are judged below, not by the crate's list; accessor min and max
         // are optional to us (bounds come from the data).
         let bounds = path.ends_with(".min") || path.ends_with(".max");
+        // A texture whose image is in an extension has no `source`.
+        let in_extension = path.starts_with("textures[") && path.ends_with("].source");
         if e != json::validation::Error::Unsupported
-            && !(bounds && e == json::validation::Error::Missing)
+            && !((bounds || in_extension) && e == json::validation::Error::Missing)
         {
             errors.push(format!("{path}: {e}"));
         }
@@ -173,7 +189,7 @@ fn check(root: &json::Root) -> Result<Vec<String>, String> {
     }
     let mut warnings = Vec::new();
     for ext in &root.extensions_required {
-        if DECODED.contains(&ext.as_str()) {
+        if DECODED.contains(&ext.as_str()) || IMAGE_EXTENSIONS.contains(&ext.as_str()) {
             continue;
         }
         let looks = [

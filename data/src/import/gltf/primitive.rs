@@ -173,7 +173,7 @@ pub(super) fn primitive(
     {
         let (v, _) = acc.floats(a, Semantic::TexCoord)?;
         same_count(a, "TEXCOORD", v.len() / 2)?;
-        mesh.uvs = v.chunks_exact(2).map(|c| map.apply([c[0], c[1]])).collect();
+        mesh.uvs = map.coordinates(&v);
         mesh.validate()?;
     }
     Ok(Some(mesh))

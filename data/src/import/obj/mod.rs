@@ -6,9 +6,12 @@
 //! error it reports names the source line. Positions are read in double precision and moved to
 //! the model's local origin ([`crate::bulk::local_origin`]): survey coordinates keep their
 //! millimetres. A material library that is missing or unreadable costs only colours (warned).
-//! A material's `map_Kd` image (PNG or JPEG, beside the library) is its texture, with `map_d`'s
-//! luminance as a cut-out mask and `d` below 1 as blending; an image that is missing or does
-//! not decode is named in a warning and the material keeps its colour.
+//! A material's `map_Kd` image (any format the `image` crate reads, TGA included; found beside
+//! the library as Windows exporters meant it: [`crate::import::files`]) is its texture, all of
+//! a model's scaled to one budget, with `map_d`'s luminance as a cut-out mask; `d` below 1
+//! (or `1 − Tr` without `d`) is blending; `Ke` is emitted light. An image that is missing or
+//! does not decode is named in a warning and the material keeps its colour. Each object's
+//! texture coordinates lose their whole-number offset (the maps repeat).
 
 pub mod text;
 
@@ -17,12 +20,14 @@ use super::mesh_from_streams;
 use crate::bulk::{DBox, bulk, local_origin};
 use crate::error::{DataError, Result};
 use crate::frame::SourceFrame;
-use crate::import::image::decode;
+use crate::import::files;
+use crate::import::image::{MODEL_TEXELS, decode, dimensions, fit, limit_warning};
 use crate::model::{Instance, Material, Model, ObjectDef};
-use crate::texture::{AlphaMode, Wrap};
+use crate::texture::{AlphaMode, TextureImage, Wrap};
 use glam::{DMat4, DVec3, Mat4};
+use std::collections::{BTreeMap, HashMap};
 use std::io::{BufRead, Read};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Imports an OBJ file (and its MTL library when it loads; a missing MTL only loses colours),
 /// in the unit and up axis `options` give or the geometry shows ([`crate::import::frame`]).
@@ -84,18 +89,27 @@ pub fn import_slice(
         materials: vec![Material::default()],
         ..Model::default()
     };
-    for m in &mtl {
-        let (texture, mask) = match &m.diffuse_texture {
-            Some(file) => material_texture(base, m, file, &mut model.textures, &mut warnings),
-            None => (None, false),
-        };
-        let alpha = m.dissolve.unwrap_or(1.0) as f32;
+    let maps = material_textures(base, &mtl, &mut model.textures, &mut warnings);
+    for (m, (texture, mask)) in mtl.iter().zip(maps) {
+        // `d` is opacity; `Tr` (transparency) its complement where `d` is absent.
+        let transparency = m
+            .unknown_param
+            .get("Tr")
+            .and_then(|t| t.trim().parse::<f64>().ok());
+        let alpha = m
+            .dissolve
+            .or(transparency.filter(|t| t.is_finite()).map(|t| 1.0 - t))
+            .unwrap_or(1.0)
+            .clamp(0.0, 1.0) as f32;
         model.materials.push(Material {
             name: m.name.clone(),
             base_color: m.diffuse.map_or([1.0, 1.0, 1.0, alpha], |d| {
                 [d[0] as f32, d[1] as f32, d[2] as f32, alpha]
             }),
             texture,
+            emissive: m
+                .emissive
+                .map_or([0.0; 3], |e| e.map(|c| c.max(0.0) as f32)),
             alpha: if mask {
                 AlphaMode::Mask(0.5)
             } else if alpha < 1.0 {
@@ -103,6 +117,7 @@ pub fn import_slice(
             } else {
                 AlphaMode::Opaque
             },
+            ..Material::default()
         });
     }
     // Positions in f64: the unit and up axis first, then the bulk and its origin in metres,
@@ -199,10 +214,20 @@ pub fn import_slice(
             .is_some_and(|m| m.texture.is_some());
         if textured && mesh.texcoords.len() == mesh.positions.len() / 3 * 2 {
             // OBJ puts v = 0 at the image's bottom; textures here start at the top (glTF).
-            lod.uvs = mesh
+            // The maps repeat: the whole-number offset comes off in f64 (world-unit tiling).
+            let uv: Vec<[f64; 2]> = mesh
                 .texcoords
                 .chunks_exact(2)
-                .map(|c| [c[0] as f32, 1.0 - c[1] as f32])
+                .map(|c| [c[0], 1.0 - c[1]])
+                .collect();
+            let floor = |k: usize| {
+                let min = uv.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min);
+                if min.is_finite() { min.floor() } else { 0.0 }
+            };
+            let offset = [floor(0), floor(1)];
+            lod.uvs = uv
+                .iter()
+                .map(|p| [(p[0] - offset[0]) as f32, (p[1] - offset[1]) as f32])
                 .collect();
             lod.validate()
                 .map_err(|e| format!("object '{}': {e}", m.name))?;
@@ -226,77 +251,136 @@ pub fn import_slice(
     Ok(model)
 }
 
-/// Loads a material's `map_Kd` (and `map_d` as its alpha) into `textures`, once per file:
-/// the texture's index and whether it is a cut-out. A map that cannot be read costs a warning.
-fn material_texture(
+/// Loads the materials' `map_Kd` images (with `map_d` as alpha) into `textures`, all scaled
+/// by one factor to the model's texture budget ([`crate::import::image::fit`]): per material,
+/// its texture's index and whether it is a cut-out. A map shared by several materials is
+/// loaded once, unless one adds its own `map_d` mask. A map that cannot be read costs a
+/// warning naming it, and its material is drawn in its colour.
+fn material_textures(
     base: Option<&Path>,
-    m: &tobj::Material,
-    file: &str,
-    textures: &mut Vec<crate::texture::TextureImage>,
+    mtl: &[tobj::Material],
+    textures: &mut Vec<TextureImage>,
     warnings: &mut Vec<String>,
-) -> (Option<u32>, bool) {
-    let load = |file: &str| -> Result<crate::texture::TextureImage, String> {
-        let dir = base.ok_or("no directory to read it from")?;
-        let path = map_path(dir, file);
+) -> Vec<(Option<u32>, bool)> {
+    // Every named map found and sized first.
+    // Each map's file and size (texels), or why it cannot be read.
+    type Sized = Result<(PathBuf, (u32, u32)), String>;
+    let mut files: BTreeMap<&str, Sized> = BTreeMap::new();
+    for m in mtl {
+        for file in [&m.diffuse_texture, &m.dissolve_texture]
+            .into_iter()
+            .flatten()
+        {
+            files.entry(file.as_str()).or_insert_with(|| {
+                let dir = base.ok_or("no directory to read it from")?;
+                let (path, warning) = map_path(dir, file)?;
+                warnings.extend(warning.map(|w| format!("material '{}': map {w}", m.name)));
+                let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+                let size =
+                    dimensions(file, &bytes).map_err(|e| format!("{}: {e}", path.display()))?;
+                warnings.extend(limit_warning(file, size));
+                Ok((path, size))
+            });
+        }
+    }
+    let kd: Vec<(u32, u32)> = mtl
+        .iter()
+        .filter_map(|m| m.diffuse_texture.as_deref())
+        .collect::<std::collections::BTreeSet<_>>()
+        .into_iter()
+        .filter_map(|f| files[f].as_ref().ok().map(|r| r.1))
+        .collect();
+    let (scale, budget) = fit(&kd, MODEL_TEXELS);
+    warnings.extend(budget);
+    let load = |file: &str, scale: f64| -> Result<TextureImage, String> {
+        let (path, _) = files[file].clone()?;
         let bytes = std::fs::read(&path).map_err(|e| format!("{}: {e}", path.display()))?;
-        decode(file, &bytes, [Wrap::Repeat; 2]).map_err(|e| format!("{}: {e}", path.display()))
+        decode(file, &bytes, [Wrap::Repeat; 2], scale)
+            .map_err(|e| format!("{}: {e}", path.display()))
     };
-    // A map is shared by the materials that name it, unless one adds its own map_d mask.
-    if m.dissolve_texture.is_none()
-        && let Some(i) = textures.iter().position(|t| t.name == file)
-    {
-        return (Some(i as u32), false);
-    }
-    let mut img = match load(file) {
-        Ok(img) => img,
-        Err(e) => {
-            warnings.push(format!(
-                "material '{}': map_Kd {e}; drawn in its colour",
-                m.name
-            ));
-            return (None, false);
+    let mut shared: HashMap<&str, u32> = HashMap::new();
+    let mut out = Vec::with_capacity(mtl.len());
+    for m in mtl {
+        let Some(file) = m.diffuse_texture.as_deref() else {
+            out.push((None, false));
+            continue;
+        };
+        if m.dissolve_texture.is_none()
+            && let Some(&i) = shared.get(file)
+        {
+            out.push((Some(i), false));
+            continue;
         }
-    };
-    let mut mask = false;
-    if let Some(d) = &m.dissolve_texture {
-        match load(d) {
-            Ok(a) => {
-                let a = image::imageops::resize(
-                    &image::RgbaImage::from_raw(a.width, a.height, a.rgba).unwrap_or_default(),
-                    img.width,
-                    img.height,
-                    image::imageops::FilterType::Triangle,
-                );
-                for (p, q) in img.rgba.chunks_exact_mut(4).zip(a.pixels()) {
-                    p[3] = ((q[0] as u32 + q[1] as u32 + q[2] as u32) / 3) as u8;
-                }
-                mask = true;
+        let mut img = match load(file, scale) {
+            Ok(img) => img,
+            Err(e) => {
+                warnings.push(format!(
+                    "material '{}': map_Kd {e}; drawn in its colour",
+                    m.name
+                ));
+                out.push((None, false));
+                continue;
             }
-            Err(e) => warnings.push(format!("material '{}': map_d {e}; opaque", m.name)),
+        };
+        let mut mask = false;
+        if let Some(d) = &m.dissolve_texture {
+            match load(d, scale) {
+                Ok(a) => {
+                    let a = image::DynamicImage::from(
+                        image::RgbaImage::from_raw(a.width, a.height, a.rgba).unwrap_or_default(),
+                    )
+                    .resize_exact(img.width, img.height, image::imageops::FilterType::Triangle)
+                    .into_rgba8();
+                    for (p, q) in img.rgba.chunks_exact_mut(4).zip(a.pixels()) {
+                        p[3] = ((q[0] as u32 + q[1] as u32 + q[2] as u32) / 3) as u8;
+                    }
+                    mask = true;
+                }
+                Err(e) => warnings.push(format!("material '{}': map_d {e}; opaque", m.name)),
+            }
         }
+        textures.push(img);
+        let i = textures.len() as u32 - 1;
+        if !mask {
+            shared.insert(file, i);
+        }
+        out.push((Some(i), mask));
     }
-    textures.push(img);
-    (Some(textures.len() as u32 - 1), mask)
+    out
 }
 
-/// A map statement's file beside the library: the whole text, else its last word (after options
-/// such as `-s 1 1 1` or `-bm 0.5`), with Windows separators (`.\tex.jpg`) read as `/`, else
-/// the bare file name in the library's directory; the first that exists.
-fn map_path(dir: &Path, file: &str) -> std::path::PathBuf {
+/// A map statement's file beside the library ([`files::find`]: `\` read as `/`, any case):
+/// the whole text, else its last word (after options such as `-s 1 1 1` or `-bm 0.5`), each
+/// as written, else its bare file name in the library's directory; the first found, with the
+/// warning saying how it was found.
+fn map_path(dir: &Path, file: &str) -> Result<(PathBuf, Option<String>), String> {
     let last = file.split_whitespace().last().unwrap_or(file);
-    let mut candidates = Vec::new();
+    let mut first_error = None;
     for f in [file.trim(), last] {
-        let f = f.replace('\\', "/");
-        candidates.push(dir.join(&f));
-        if let Some(name) = Path::new(&f).file_name() {
-            candidates.push(dir.join(name));
+        let bare = f.rsplit(['/', '\\']).next().unwrap_or(f);
+        for candidate in [f, bare] {
+            match files::find(dir, candidate) {
+                Ok(found) => {
+                    // MTL names are Windows paths: only a difference in case is news.
+                    let warning = match (candidate == f, found.warning) {
+                        (true, w) => w.filter(|_| found.case_differs),
+                        (false, _) => Some(format!(
+                            "'{f}' not found as written: read as '{}' beside the library",
+                            found
+                                .path
+                                .file_name()
+                                .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+                        )),
+                    };
+                    return Ok((found.path, warning));
+                }
+                Err(e) => {
+                    first_error.get_or_insert(e);
+                }
+            }
         }
     }
-    candidates
-        .iter()
-        .find(|p| p.is_file())
-        .cloned()
-        .unwrap_or_else(|| dir.join(last))
+    Err(first_error.unwrap_or_else(|| format!("'{file}' not found")))
 }
 
 /// A reader that hands out at most one line per `fill_buf`, so that when the parser fails,
