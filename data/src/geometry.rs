@@ -200,6 +200,8 @@ impl Mesh {
     }
 
     /// The mesh with positions and normals transformed by `m` (normals by its inverse transpose).
+    /// A mirroring `m` (negative determinant) also reverses each triangle's winding, so the
+    /// side its front was on stays the front (glTF §3.7.4), as single-sided culling needs.
     pub fn transformed(&self, m: &Mat4) -> Mesh {
         let normal_matrix = Mat3::from_mat4(*m).inverse().transpose();
         let vertices = self
@@ -211,9 +213,15 @@ impl Mesh {
                 Vertex::new(p.into(), n.into(), v.color_f32())
             })
             .collect();
+        let mut indices = self.indices.clone();
+        if m.determinant() < 0.0 {
+            for t in indices.chunks_exact_mut(3) {
+                t.swap(1, 2);
+            }
+        }
         Mesh {
             vertices,
-            indices: self.indices.clone(),
+            indices,
             uvs: self.uvs.clone(),
         }
     }

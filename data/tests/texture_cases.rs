@@ -150,6 +150,10 @@ fn webp_is_decoded_and_ktx2_leaves_its_material_in_colour_with_a_warning() {
     let floor = material(&m, "floor");
     let t = &m.textures[floor.texture.expect("the WebP floor") as usize];
     assert_eq!(t.name, "tex/floor.webp");
+    assert_eq!((t.width, t.height), (256, 256));
+    // Its picture: the blue floor tiles, as its PNG twin in the other cases.
+    let avg = portico_data::texture::average_color(&t.rgba);
+    assert!(avg[2] > 2.0 * avg[0] && avg[2] > 0.5, "{avg:?}");
     assert!(m.warnings.is_empty(), "{:?}", m.warnings);
     let m = import("ktx2-webp/house_ktx2_required.gltf");
     assert!(material(&m, "inner").texture.is_none());
@@ -204,9 +208,20 @@ fn mtl_tr_is_one_minus_d() {
         glass.base_color
     );
     assert_eq!(material(&m, "wall").alpha, AlphaMode::Opaque);
-    // With both, d wins (3ds Max writes `d 1` and `Tr 0`).
-    let m = import("tga-maps/house_tga.obj");
-    assert_eq!(material(&m, "wall").base_color[3], 1.0);
+    // With both, d wins (3ds Max writes `d 1` and `Tr 0`; here they disagree).
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("b.mtl"),
+        "newmtl both\nKd 1 1 1\nd 0.7\nTr 0.5\n",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.path().join("b.obj"),
+        "mtllib b.mtl\nusemtl both\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n",
+    )
+    .unwrap();
+    let m = import_file(&dir.path().join("b.obj")).unwrap();
+    assert!((material(&m, "both").base_color[3] - 0.7).abs() < 1e-6);
 }
 
 #[test]

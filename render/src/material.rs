@@ -41,6 +41,10 @@ pub(crate) struct Materials {
     pub(crate) textured_over: wgpu::RenderPipeline,
     /// Plain and blended.
     pub(crate) plain_over: wgpu::RenderPipeline,
+    /// Plain, opaque and single-sided: back faces culled.
+    pub(crate) plain_culled: wgpu::RenderPipeline,
+    /// The same under a mirroring transform (clockwise fronts).
+    pub(crate) plain_culled_mirrored: wgpu::RenderPipeline,
 }
 
 impl Materials {
@@ -66,7 +70,33 @@ impl Materials {
         let textured_entries = ("vs_textured", "fs_textured");
         let pipeline = |label, layout, entries, buffers: &[_], blending| {
             surface_pipeline(
-                device, label, layout, &shader, entries, buffers, None, samples, blending,
+                device,
+                label,
+                layout,
+                &shader,
+                entries,
+                buffers,
+                None,
+                wgpu::FrontFace::Ccw,
+                samples,
+                blending,
+            )
+        };
+        // Single-sided plain surfaces: back faces culled by the rasteriser, not discarded in the
+        // shader (a discard would cost every opaque draw its early depth test); a mirroring
+        // transform turns which winding is the front.
+        let culled = |label, front_face| {
+            surface_pipeline(
+                device,
+                label,
+                &plain_layout,
+                &shader,
+                ("vs_main", "fs_main"),
+                &without,
+                Some(wgpu::Face::Back),
+                front_face,
+                samples,
+                Blending::Opaque,
             )
         };
         Materials {
@@ -87,10 +117,12 @@ impl Materials {
             plain_over: pipeline(
                 "blended",
                 &plain_layout,
-                ("vs_main", "fs_main"),
+                ("vs_main", "fs_over"),
                 &without,
                 Blending::Over,
             ),
+            plain_culled: culled("single-sided", wgpu::FrontFace::Ccw),
+            plain_culled_mirrored: culled("single-sided, mirrored", wgpu::FrontFace::Cw),
             layout,
         }
     }
@@ -105,7 +137,8 @@ impl Materials {
         segment: &[u8],
         wrap: [Wrap; 2],
     ) -> Result<GpuTexture, RenderError> {
-        // Decoded here, where the segment arrives (the client's IO stage, native and browser).
+        // Decoded here, where the segment arrives: the native client's IO thread; in the
+        // browser, the page's one thread between frames.
         let view = decode_segment(segment).map_err(RenderError::Texture)?;
         let max = device.limits().max_texture_dimension_2d;
         if view.width > max || view.height > max {

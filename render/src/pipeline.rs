@@ -189,8 +189,9 @@ pub(crate) fn vertex_layouts(textured: bool) -> Vec<Option<wgpu::VertexBufferLay
     out
 }
 
-/// The one pipeline: depth-tested opaque triangles, no culling (building models are often
-/// two-sided or inconsistently wound; the shader lights both sides).
+/// The walkthrough's pipeline: depth-tested opaque triangles, no culling (building models are
+/// often two-sided or inconsistently wound; the shader lights both sides). Single-sided
+/// surfaces draw through the culling variants of `material.rs`.
 pub(crate) fn create_pipeline(
     device: &wgpu::Device,
     globals: &wgpu::BindGroupLayout,
@@ -235,6 +236,7 @@ pub(crate) fn surface_pipeline(
     entries: (&str, &str),
     buffers: &[Option<wgpu::VertexBufferLayout<'_>>],
     cull_mode: Option<wgpu::Face>,
+    front_face: wgpu::FrontFace,
     samples: u32,
     blending: Blending,
 ) -> wgpu::RenderPipeline {
@@ -250,6 +252,7 @@ pub(crate) fn surface_pipeline(
         },
         primitive: wgpu::PrimitiveState {
             cull_mode,
+            front_face,
             ..Default::default()
         },
         depth_stencil: Some(wgpu::DepthStencilState {
@@ -298,6 +301,7 @@ pub(crate) fn opaque_pipeline(
         ("vs_main", "fs_main"),
         buffers,
         cull_mode,
+        wgpu::FrontFace::Ccw,
         samples,
         Blending::Opaque,
     )

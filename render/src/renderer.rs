@@ -485,7 +485,13 @@ impl Renderer {
         let blended = |d: &Draw<'_>| d.alpha == AlphaMode::Blend;
         let m = &self.materials;
         self.encode_group(pass, draws, &mut timing, |d| {
-            (!blended(d) && !d.textured()).then_some(&self.pipeline)
+            (!blended(d) && !d.textured()).then_some(if d.surface.double_sided {
+                &self.pipeline
+            } else if d.transform.determinant() < 0.0 {
+                &m.plain_culled_mirrored
+            } else {
+                &m.plain_culled
+            })
         });
         self.encode_group(pass, draws, &mut timing, |d| {
             (!blended(d) && d.textured()).then_some(&m.textured)

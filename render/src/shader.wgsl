@@ -94,12 +94,24 @@ fn shade(normal: vec3<f32>) -> f32 {
     return ambient + (1.0 - ambient) * diffuse;
 }
 
+// Opaque plain surfaces: a single-sided one is drawn by a pipeline that culls its back faces
+// (render/src/material.rs), so nothing here discards and the early depth test stays.
+fn plain(in: VertexOut) -> vec4<f32> {
+    return vec4<f32>(lit(in.color.rgb, in.normal, in.flags) + in.emissive, in.color.a);
+}
+
 @fragment
-fn fs_main(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+    return plain(in);
+}
+
+// Blended plain surfaces: back faces of single-sided ones discarded here.
+@fragment
+fn fs_over(in: VertexOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
     if !seen(in.flags, front) {
         discard;
     }
-    return vec4<f32>(lit(in.color.rgb, in.normal, in.flags) + in.emissive, in.color.a);
+    return plain(in);
 }
 
 // Textured meshes: the texture (group 1) at the mesh's coordinates (location 9),

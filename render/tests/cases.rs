@@ -203,10 +203,27 @@ fn a_mirroring_transform_keeps_the_front_of_a_single_sided_surface() {
     let (front, back) = (Vec3::new(0.0, 0.0, 2.0), Vec3::new(0.0, 0.0, -2.0));
     assert_eq!(centre(&mut r, Mat4::IDENTITY, front), 255);
     assert_eq!(centre(&mut r, Mat4::IDENTITY, back), 0);
+    // A two-sided surface is drawn, and lit, from behind too.
+    let mut d = Draw::new(&gpu, Mat4::IDENTITY, [1.0; 4]);
+    d.surface = Surface::default();
+    r.render(&camera(back, Vec3::ZERO), &[d]).unwrap();
+    assert_eq!(r.read_pixels().unwrap().get_pixel(W / 2, H / 2).0[0], 255);
     // Mirrored in x: the triangles wind the other way, and glTF says the front stays +z.
     let mirror = Mat4::from_scale(Vec3::new(-1.0, 1.0, 1.0));
     assert_eq!(centre(&mut r, mirror, front), 255);
     assert_eq!(centre(&mut r, mirror, back), 0);
+    // Mirrored into the mesh itself, as a flattened build bakes it: still the same front.
+    let baked = r
+        .upload(&encode_geometry(&quad.transformed(&mirror)))
+        .unwrap();
+    let baked_centre = |r: &mut Renderer, eye: Vec3| {
+        let mut d = Draw::new(&baked, Mat4::IDENTITY, [1.0; 4]);
+        d.surface = single;
+        r.render(&camera(eye, Vec3::ZERO), &[d]).unwrap();
+        r.read_pixels().unwrap().get_pixel(W / 2, H / 2).0[0]
+    };
+    assert_eq!(baked_centre(&mut r, front), 255);
+    assert_eq!(baked_centre(&mut r, back), 0);
 }
 
 #[test]

@@ -117,8 +117,9 @@ impl InstanceRecord {
 }
 
 impl Header {
-    /// Every LOD's geometry segment with the bytes it occupies decoded
-    /// ([`crate::geometry::plain_size`]): a compressed segment's wire length says less.
+    /// Every LOD's geometry segment and every texture segment with the bytes it occupies
+    /// decoded ([`crate::geometry::plain_size`], [`crate::texture::MipSegment::texel_bytes`]):
+    /// a compressed segment's wire length says less, and a cache is charged what it decodes to.
     pub fn decoded_sizes(&self) -> impl Iterator<Item = (u32, u64)> + '_ {
         self.objects
             .iter()
@@ -130,6 +131,12 @@ impl Header {
                     crate::geometry::plain_size(l.vertices, l.triangles, l.uv),
                 )
             })
+            .chain(
+                self.textures
+                    .iter()
+                    .flat_map(|t| &t.segments)
+                    .map(|s| (s.segment, s.texel_bytes())),
+            )
     }
 
     /// The LODs an instance draws with: its own, else its definition's (finest first).

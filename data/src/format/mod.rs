@@ -53,7 +53,7 @@ pub enum SegmentKind {
     Texture = 4,
     /// The occluder faces the cells were built from (used by `portico verify`).
     Occluders = 5,
-    /// A material's texture: RGBA8 mip levels, one level and every coarser one
+    /// A material's texture: one mip level and every coarser one, coded as a PNG or JPEG of the finest
     /// ([`crate::texture`]).
     Mips = 6,
 }

@@ -49,6 +49,9 @@ pub fn find(dir: &Path, name: &str) -> Result<Found, String> {
             _ => None,
         })
         .collect();
+    if parts.is_empty() {
+        return Err(format!("'{name}' names no file"));
+    }
     let slash = dir.join(parts.join("/"));
     if slash.is_file() {
         return Ok(Found {
@@ -147,5 +150,7 @@ mod tests {
         assert!(find(d, "../top.png").unwrap_err().contains("outside"));
         assert!(find(d, "/etc/passwd").unwrap_err().contains("outside"));
         assert!(find(d, "..\\top.png").unwrap_err().contains("outside"));
+        assert!(find(d, ".").unwrap_err().contains("names no file"));
+        assert!(find(d, "").unwrap_err().contains("names no file"));
     }
 }

@@ -17,8 +17,8 @@ use std::io::Cursor;
 
 /// Largest image side read (texels): more is a broken or hostile header.
 pub const MAX_DECODED_SIDE: u32 = 1 << 15;
-/// Most bytes one image may decode into before it is scaled (2 GiB).
-pub const MAX_DECODED_BYTES: u64 = 2 << 30;
+/// Most bytes one image may decode into before it is scaled (1 GiB: 16,384² RGBA8).
+pub const MAX_DECODED_BYTES: u64 = 1 << 30;
 /// Texels (finest levels) all of a model's textures may hold together: 64 M, 256 MiB as
 /// RGBA8. Past it every texture is scaled by one factor ([`fit`]).
 pub const MODEL_TEXELS: u64 = 64 << 20;
@@ -27,11 +27,15 @@ pub const MODEL_TEXELS: u64 = 64 << 20;
 const FORMATS: &str = "PNG, JPEG, TGA, BMP, GIF, TIFF, WebP, QOI, PNM, ICO, HDR or DDS";
 
 /// A reader of `bytes` in the format the content says, else the name's extension (TGA, which
-/// has no magic number, by its extension first).
-fn reader<'a>(name: &str, bytes: &'a [u8]) -> Result<image::ImageReader<Cursor<&'a [u8]>>, String> {
+/// has no magic number, by its extension first unless `content_first`).
+fn reader<'a>(
+    name: &str,
+    bytes: &'a [u8],
+    content_first: bool,
+) -> Result<image::ImageReader<Cursor<&'a [u8]>>, String> {
     let by_name = image::ImageFormat::from_path(name.replace('\\', "/")).ok();
     let mut reader = image::ImageReader::new(Cursor::new(bytes));
-    if by_name == Some(image::ImageFormat::Tga) {
+    if by_name == Some(image::ImageFormat::Tga) && !content_first {
         reader.set_format(image::ImageFormat::Tga);
     } else {
         reader = reader.with_guessed_format().map_err(|e| e.to_string())?;
@@ -53,9 +57,11 @@ fn reader<'a>(name: &str, bytes: &'a [u8]) -> Result<image::ImageReader<Cursor<&
 /// The size of image `bytes` named `name` (texels), read from its header without decoding.
 /// Errors say what is wrong in one line, without the name.
 pub fn dimensions(name: &str, bytes: &[u8]) -> Result<(u32, u32), String> {
-    let (w, h) = reader(name, bytes)?
+    // A `.tga` that is another format after all is read by its content.
+    let (w, h) = reader(name, bytes, false)?
         .into_dimensions()
-        .map_err(|e| e.to_string())?;
+        .map_err(|e| e.to_string())
+        .or_else(|e| reader(name, bytes, true)?.into_dimensions().map_err(|_| e))?;
     if w == 0 || h == 0 || w > MAX_DECODED_SIDE || h > MAX_DECODED_SIDE {
         return Err(format!(
             "a {w}x{h} image is beyond what is read ({MAX_DECODED_SIDE} a side)"
@@ -125,7 +131,10 @@ pub fn decode(
     wrap: [Wrap; 2],
     scale: f64,
 ) -> Result<TextureImage, String> {
-    let img = reader(name, bytes)?.decode().map_err(|e| e.to_string())?;
+    let img = reader(name, bytes, false)?
+        .decode()
+        .map_err(|e| e.to_string())
+        .or_else(|e| reader(name, bytes, true)?.decode().map_err(|_| e))?;
     let (w, h) = (img.width(), img.height());
     let (nw, nh) = fitted(w, h, scale);
     let img = if (nw, nh) != (w, h) {
@@ -175,9 +184,11 @@ mod tests {
         let tga = encoded(4, 4, image::ImageFormat::Tga);
         let t = decode("textures\\wall.TGA", &tga, [Wrap::Repeat; 2], 1.0).unwrap();
         assert_eq!(&t.rgba[..4], &[200, 100, 50, 255]);
-        // A PNG named .jpg is a PNG.
+        // A PNG named .jpg is a PNG, and so is one named .tga.
         let png = encoded(2, 2, image::ImageFormat::Png);
         assert!(decode("wrong.jpg", &png, [Wrap::Repeat; 2], 1.0).is_ok());
+        assert_eq!(dimensions("wrong.tga", &png).unwrap(), (2, 2));
+        assert!(decode("wrong.tga", &png, [Wrap::Repeat; 2], 1.0).is_ok());
         for format in [
             image::ImageFormat::Bmp,
             image::ImageFormat::Gif,

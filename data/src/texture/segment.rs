@@ -207,21 +207,30 @@ fn decode_image(
     w: u32,
     h: u32,
 ) -> Result<Vec<u8>, String> {
-    let mut reader = image::ImageReader::with_format(std::io::Cursor::new(file), format);
-    let mut limits = image::Limits::default();
-    limits.max_image_width = Some(MAX_SIZE);
-    limits.max_image_height = Some(MAX_SIZE);
-    reader.limits(limits);
-    let img = reader
-        .decode()
+    let reader = || {
+        let mut r = image::ImageReader::with_format(std::io::Cursor::new(file), format);
+        let mut limits = image::Limits::default();
+        limits.max_image_width = Some(w);
+        limits.max_image_height = Some(h);
+        // The image decoded (16-bit RGBA at most) and its RGBA8 copy.
+        limits.max_alloc = Some(w as u64 * h as u64 * 12 + (1 << 20));
+        r.limits(limits);
+        r
+    };
+    // The size first, from the file's header: nothing is decoded that the segment's header
+    // does not allow.
+    let size = reader()
+        .into_dimensions()
         .map_err(|e| format!("texture segment: {e}"))?;
-    if (img.width(), img.height()) != (w, h) {
+    if size != (w, h) {
         return Err(format!(
             "texture segment says {w}x{h} texels, its image is {}x{}",
-            img.width(),
-            img.height()
+            size.0, size.1
         ));
     }
+    let img = reader()
+        .decode()
+        .map_err(|e| format!("texture segment: {e}"))?;
     Ok(img.into_rgba8().into_raw())
 }
 
@@ -418,10 +427,8 @@ mod tests {
         let mut bad = coded[0].bytes.clone();
         bad[4..8].copy_from_slice(&32u32.to_le_bytes());
         bad[12..16].copy_from_slice(&6u32.to_le_bytes());
-        assert!(
-            decode_segment(&bad)
-                .unwrap_err()
-                .contains("its image is 64x64")
-        );
+        // Refused from the file's header, before its texels are decoded.
+        let err = decode_segment(&bad).unwrap_err();
+        assert!(err.contains("64x64") || err.contains("limit"), "{err}");
     }
 }

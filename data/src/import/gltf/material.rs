@@ -118,9 +118,16 @@ pub(super) fn materials(
             Ok(size)
         });
     }
-    let sizes: Vec<(u32, u32)> = images
-        .values()
-        .filter_map(|r| r.as_ref().ok())
+    // One texture per (image, wrap): an image sampled two ways is stored, and counted, twice.
+    let keys: std::collections::BTreeSet<(usize, [u8; 2])> = slots
+        .iter()
+        .flatten()
+        .flatten()
+        .map(|(s, w)| (*s, w.map(|w| w as u8)))
+        .collect();
+    let sizes: Vec<(u32, u32)> = keys
+        .iter()
+        .filter_map(|(s, _)| images[s].as_ref().ok())
         .copied()
         .collect();
     let (scale, budget) = fit(&sizes, MODEL_TEXELS);
