@@ -92,6 +92,25 @@ pub struct DbStats {
     /// The lowest PSNR (dB) of any coded texture segment against its texels; `None` when all
     /// are lossless.
     pub texture_psnr: Option<f32>,
+    /// Each material texture: its name, stored size (texels), segments and their coded bytes.
+    pub texture_list: Vec<TextureStat>,
+}
+
+/// One material texture in [`DbStats::texture_list`].
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TextureStat {
+    /// Name from the source (file name or glTF image).
+    pub name: String,
+    /// Width of its finest level (texels).
+    pub width: u32,
+    /// Height of its finest level (texels).
+    pub height: u32,
+    /// Segments (coarse first).
+    pub segments: u32,
+    /// Their bytes as stored and sent.
+    pub bytes: u64,
+    /// The lowest PSNR of its coded segments (dB); `None` when lossless.
+    pub psnr: Option<f32>,
 }
 
 /// Computes the statistics of an open database (header only; no segment is read).
@@ -189,6 +208,23 @@ pub fn stats(db: &Database) -> DbStats {
             .iter()
             .filter_map(|t| t.psnr)
             .min_by(f32::total_cmp),
+        texture_list: h
+            .textures
+            .iter()
+            .map(|t| TextureStat {
+                name: t.name.clone(),
+                width: t.width,
+                height: t.height,
+                segments: t.segments.len() as u32,
+                bytes: t
+                    .segments
+                    .iter()
+                    .filter_map(|s| db.segments().get(s.segment as usize))
+                    .map(|e| e.length)
+                    .sum(),
+                psnr: t.psnr,
+            })
+            .collect(),
         name: h.name.clone(),
         format_version: db.prologue().version,
         flattened: h.flattened,
@@ -331,7 +367,7 @@ impl DbStats {
         }
         if self.textures > 0 {
             s.push_str(&format!(
-                "\n  textures {}: {:.1} MB of mip segments ({:.0} % of the file; {:.1} MB decoded), {:.2} MB of them coarse, {}\n",
+                "\n  textures {}: {:.1} MB of mip segments ({:.0} % of the file; {:.1} MB decoded, every segment a whole chain), {:.2} MB of them coarse, {}\n",
                 self.textures,
                 self.mip_bytes as f64 / 1e6,
                 100.0 * self.mip_bytes as f64 / self.file_bytes.max(1) as f64,
@@ -339,6 +375,25 @@ impl DbStats {
                 self.coarse_mip_bytes as f64 / 1e6,
                 self.texture_psnr.map_or("all lossless".to_string(), |p| format!("PSNR at least {p:.1} dB")),
             ));
+            const LISTED: usize = 12;
+            for t in self.texture_list.iter().take(LISTED) {
+                s.push_str(&format!(
+                    "    {:<32} {:>5}x{:<5} {:>2} segments {:>9.1} KB  {}\n",
+                    t.name,
+                    t.width,
+                    t.height,
+                    t.segments,
+                    t.bytes as f64 / 1e3,
+                    t.psnr
+                        .map_or("lossless".to_string(), |p| format!("{p:.1} dB"))
+                ));
+            }
+            if self.texture_list.len() > LISTED {
+                s.push_str(&format!(
+                    "    ... and {} more\n",
+                    self.texture_list.len() - LISTED
+                ));
+            }
         }
         if self.clusters > 0 {
             s.push_str(&format!(

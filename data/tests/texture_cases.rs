@@ -222,6 +222,15 @@ fn mtl_tr_is_one_minus_d() {
     .unwrap();
     let m = import_file(&dir.path().join("b.obj")).unwrap();
     assert!((material(&m, "both").base_color[3] - 0.7).abs() < 1e-6);
+    // `Tr 1` alone would hide the surface: some exporters mean opacity by it.
+    std::fs::write(dir.path().join("b.mtl"), "newmtl both\nKd 1 1 1\nTr 1\n").unwrap();
+    let m = import_file(&dir.path().join("b.obj")).unwrap();
+    assert_eq!(material(&m, "both").alpha, AlphaMode::Opaque);
+    assert!(
+        warned(&m, &["'both'", "Tr 1", "opaque"]),
+        "{:?}",
+        m.warnings
+    );
 }
 
 #[test]

@@ -152,6 +152,18 @@ fn a_built_database_holds_each_texture_coarse_first_as_whole_mip_chains() {
     assert!(lods[0].uv, "the finest LOD carries coordinates");
     assert!(h.objects[0].uv_span > 0.5);
     assert_eq!(h.materials[h.objects[0].material as usize].texture, Some(0));
+    // `portico inspect` names it, with its size and what its segments weigh.
+    let st = portico_data::stats::stats(&db);
+    assert_eq!(st.texture_list.len(), 1);
+    assert_eq!(
+        (st.texture_list[0].width, st.texture_list[0].segments),
+        (211, 3)
+    );
+    assert!(
+        st.to_text().contains(&st.texture_list[0].name),
+        "{}",
+        st.to_text()
+    );
     let avg = t.average;
     assert!(avg.iter().take(3).all(|c| (0.0..=1.0).contains(c)));
 }

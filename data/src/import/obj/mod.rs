@@ -91,11 +91,21 @@ pub fn import_slice(
     };
     let maps = material_textures(base, &mtl, &mut model.textures, &mut warnings);
     for (m, (texture, mask)) in mtl.iter().zip(maps) {
-        // `d` is opacity; `Tr` (transparency) its complement where `d` is absent.
-        let transparency = m
+        // `d` is opacity; `Tr` (transparency) its complement where `d` is absent. Some
+        // exporters write `Tr` as opacity: `Tr 1` alone would hide the surface, so it is read
+        // as opaque, with a warning.
+        let mut transparency = m
             .unknown_param
             .get("Tr")
             .and_then(|t| t.trim().parse::<f64>().ok());
+        if m.dissolve.is_none() && transparency.is_some_and(|t| t >= 0.999) {
+            warnings.push(format!(
+                "material '{}': 'Tr 1' without 'd' would make it invisible; read as opaque \
+                 (some exporters write Tr as opacity)",
+                m.name
+            ));
+            transparency = None;
+        }
         let alpha = m
             .dissolve
             .or(transparency.filter(|t| t.is_finite()).map(|t| 1.0 - t))
@@ -262,8 +272,8 @@ fn material_textures(
     textures: &mut Vec<TextureImage>,
     warnings: &mut Vec<String>,
 ) -> Vec<(Option<u32>, bool)> {
-    // Every named map found and sized first.
-    // Each map's file and size (texels), or why it cannot be read.
+    // Every named map found and sized first: its file and size (texels), or why it cannot be
+    // read.
     type Sized = Result<(PathBuf, (u32, u32)), String>;
     let mut files: BTreeMap<&str, Sized> = BTreeMap::new();
     for m in mtl {
