@@ -111,7 +111,7 @@ pub fn code_segments(width: u32, height: u32, chain: &[Vec<u8>]) -> Vec<CodedSeg
         .into_iter()
         .map(|first| {
             let (w, h) = level_size(width, height, first);
-            let (codec, file, psnr) = code_level(w, h, &chain[first as usize]);
+            let (codec, file, psnr) = code_level(w, h, &chain[first as usize..]);
             let mut bytes = Vec::with_capacity(TEXTURE_HEADER + file.len());
             header(&mut bytes, w, h, n - first, codec);
             bytes.extend_from_slice(&file);
@@ -127,9 +127,11 @@ pub fn code_segments(width: u32, height: u32, chain: &[Vec<u8>]) -> Vec<CodedSeg
         .collect()
 }
 
-/// Codes one level: PNG (RGB when opaque), or the first JPEG quality that keeps [`MIN_PSNR`]
-/// when it is smaller. Returns the codec, the file and its PSNR.
-fn code_level(w: u32, h: u32, rgba: &[u8]) -> (Codec, Vec<u8>, f64) {
+/// Codes the finest of `levels` (a segment's chain, finest first): PNG (RGB when opaque), or
+/// the first JPEG quality that keeps [`MIN_PSNR`] when it is smaller; the raw levels when even
+/// the PNG is no smaller. Returns the codec, the payload and its PSNR.
+fn code_level(w: u32, h: u32, levels: &[Vec<u8>]) -> (Codec, Vec<u8>, f64) {
+    let rgba = &levels[0];
     let opaque = rgba.chunks_exact(4).all(|p| p[3] == 255);
     let rgb: Vec<u8> = if opaque {
         rgba.chunks_exact(4)
@@ -146,11 +148,7 @@ fn code_level(w: u32, h: u32, rgba: &[u8]) -> (Codec, Vec<u8>, f64) {
         encoder.write_image(rgba, w, h, image::ExtendedColorType::Rgba8)
     };
     if written.is_err() {
-        let mut raw = Vec::new();
-        for l in mip_chain(w, h, rgba) {
-            raw.extend_from_slice(&l);
-        }
-        return (Codec::Raw, raw, f64::INFINITY);
+        return (Codec::Raw, levels.concat(), f64::INFINITY);
     }
     if opaque {
         for q in QUALITIES {
@@ -175,11 +173,7 @@ fn code_level(w: u32, h: u32, rgba: &[u8]) -> (Codec, Vec<u8>, f64) {
     }
     if png.len() as u64 >= chain_bytes(w, h, full_levels(w, h)) {
         // Noise: the raw levels are no larger.
-        let mut raw = Vec::new();
-        for l in mip_chain(w, h, rgba) {
-            raw.extend_from_slice(&l);
-        }
-        return (Codec::Raw, raw, f64::INFINITY);
+        return (Codec::Raw, levels.concat(), f64::INFINITY);
     }
     (Codec::Png, png, f64::INFINITY)
 }
