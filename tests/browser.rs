@@ -1,7 +1,8 @@
 //! The browser viewer end to end, in headless Chromium (WebGL2 through SwiftShader) driven by
 //! chromedriver: the page `portico serve` serves at `/` loads the tiny building from the same
 //! server (its geometry compressed), draws it, walks the standard tour by script, keeps its cache under the budget,
-//! logs no errors and stays alive across a server restart.
+//! logs no errors and stays alive across a server restart; then the textured building, whose
+//! texture segments the page decodes (and re-codes as BC blocks where WebGL2 offers them).
 //!
 //! Needs `web/build.sh` to have built `target/viewer/`, and Debian's `chromium` and
 //! `chromium-driver`. Without them the test prints why and passes, unless `CI` is set (CI
@@ -244,6 +245,7 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
         return;
     }
     let dir = tempfile::tempdir().unwrap();
+    let tmp = dir.path().to_path_buf();
     // Compressed geometry: the page decodes it (meshoptimizer's codecs, in Rust) on its thread.
     let opts = portico_data::build::BuildOptions {
         compress: true,
@@ -414,6 +416,51 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
         assert_eq!(s["transport"], "pull", "{s}");
         assert_eq!(s["stream_sessions"], 0, "{s}");
         assert!(s["answers"].as_u64() > Some(0), "{s}");
+        drop(stop);
+        server.join().unwrap();
+
+        // The textured building: the page decodes its texture segments (JPEG or PNG) and,
+        // where the GPU takes BC textures, re-codes them as BC1 / BC3, on its one thread.
+        let textured = common::build_tiny_textured(&tmp);
+        let state = AppState::open(&textured, config()).unwrap();
+        let (addr, stop, server) = serve(state, "127.0.0.1:0".parse().unwrap());
+        c.goto(&format!("http://{addr}/?backend=webgl#eye=0,0,0&dir=1,0,0"))
+            .await
+            .unwrap();
+        wait_for(&c, 90, "the textured viewer started", |s| {
+            s["frames"].as_u64() > Some(0)
+        })
+        .await;
+        eval(&c, "window.portico.tour(true)").await;
+        let s = wait_for(&c, 120, "texture segments decoded", |s| {
+            s["texture_segments"].as_u64() >= Some(4)
+        })
+        .await;
+        let (ms, texels, gpu) = (
+            s["texture_ms"].as_f64().unwrap(),
+            s["texture_texel_bytes"].as_u64().unwrap(),
+            s["texture_gpu_bytes"].as_u64().unwrap(),
+        );
+        eprintln!(
+            "textures in Chromium ({}): {} segments, {:.2} MB of texels in {ms:.0} ms ({:.1} ms per decoded MB), {:.2} MB on the GPU ({})",
+            s["backend"],
+            s["texture_segments"],
+            texels as f64 / 1e6,
+            ms / (texels as f64 / 1e6),
+            gpu as f64 / 1e6,
+            s["texel_format"],
+        );
+        assert!(ms > 0.0 && texels > 0, "{s}");
+        match s["texel_format"].as_str() {
+            // BC1 for the generator's opaque textures: an eighth of the texels, plus partial
+            // blocks of the smallest levels.
+            Some("Block") => assert!(gpu * 7 < texels, "{s}"),
+            Some("Rgba8") => assert_eq!(gpu, texels, "{s}"),
+            _ => panic!("texel_format: {s}"),
+        }
+        assert_eq!(s["unusable_segments"], 0, "{s}");
+        let errors = eval(&c, "return window.porticoErrors || []").await;
+        assert_eq!(errors, json!([]), "the page logged errors");
         c.close().await.unwrap();
         drop(stop);
         server.join().unwrap();

@@ -7,9 +7,7 @@ use portico_client::cost::CostModel;
 use portico_client::elision::Algorithm;
 use portico_client::frame::{Decider, Resident, Scene};
 use portico_client::view;
-use portico_data::build::{BuildOptions, Quiet, build};
 use portico_data::cells::StabList;
-use portico_data::import::import_file;
 use portico_data::path::{PathKind, generate};
 use portico_lab::bench::BenchConfig;
 use portico_lab::drawn::{DrawnFrame, DrawnLog};
@@ -20,33 +18,13 @@ use std::sync::Arc;
 
 mod common;
 
-/// Builds the tiny building (seed 2, one storey), textured or not, as `dir/NAME.portico`.
+/// Builds the tiny building (seed 2, one storey), textured or not, into `dir`.
 fn build_tiny(dir: &Path, textured: bool) -> std::path::PathBuf {
-    let params = portico_generator::Params {
-        preset: portico_generator::Preset::Tiny,
-        seed: 2,
-        floors: Some(1),
-    };
-    let mut glb = portico_generator::generate(&params, &mut |_| {})
-        .unwrap()
-        .glb;
-    let name = if textured {
-        glb = portico_generator::with_textures(&glb).unwrap();
-        "textured"
+    if textured {
+        common::build_tiny_textured(dir)
     } else {
-        "plain"
-    };
-    let file = dir.join(format!("{name}.glb"));
-    std::fs::write(&file, &glb).unwrap();
-    let db = dir.join(format!("{name}.portico"));
-    build(
-        import_file(&file).unwrap(),
-        &db,
-        &BuildOptions::default(),
-        &Quiet,
-    )
-    .unwrap();
-    db
+        common::build_tiny(dir)
+    }
 }
 
 /// Walks 80 frames of the building's tour with `cache_bytes`, a picture every 20 frames.

@@ -47,9 +47,16 @@ pub fn parse_policy(spec: &str, base: Policy) -> Result<Policy, String> {
                     _ => return Err(bad()),
                 }
             }
+            "bc" | "block" => {
+                p.block_textures = match v {
+                    "1" | "yes" | "true" => true,
+                    "0" | "no" | "false" => false,
+                    _ => return Err(bad()),
+                }
+            }
             _ => {
                 return Err(format!(
-                    "unknown policy key {k:?} (depth, gran, range, look, read, size, imp)"
+                    "unknown policy key {k:?} (depth, gran, range, look, read, size, imp, bc)"
                 ));
             }
         }
@@ -74,12 +81,13 @@ pub fn policy_spec(p: &Policy) -> String {
     let s = serde_json::to_value(p).unwrap_or_default();
     let name = |k: &str| s[k].as_str().unwrap_or("?").to_string();
     format!(
-        "depth={},gran={},range={},look={}{}",
+        "depth={},gran={},range={},look={}{}{}",
         p.depth_frames,
         name("granularity"),
         name("range_cull"),
         name("lookahead_cull"),
-        if p.impostors { ",imp=1" } else { "" }
+        if p.impostors { ",imp=1" } else { "" },
+        if p.block_textures { ",bc=1" } else { "" }
     )
 }
 
@@ -102,6 +110,12 @@ mod tests {
         assert_eq!(
             policy_spec(&p),
             "depth=32,gran=cell,range=frustum,look=plane"
+        );
+        let bc = parse_policy("bc=1", Policy::default()).unwrap();
+        assert!(bc.block_textures);
+        assert_eq!(
+            policy_spec(&bc),
+            "depth=16,gran=object,range=direction,look=predicted,bc=1"
         );
         assert!(
             parse_policy("depth=x", Policy::default())

@@ -540,6 +540,7 @@ fn write_textures(
             let chain = texture::mip_chain(t.width, t.height, &t.rgba);
             let coded = texture::code_segments(t.width, t.height, &chain);
             let psnr = coded.iter().map(|c| c.psnr).fold(f64::INFINITY, f64::min);
+            let opaque = texture::is_opaque(&t.rgba);
             let segments = coded
                 .into_iter()
                 .map(|c| {
@@ -548,6 +549,7 @@ fn write_textures(
                         width: c.width,
                         height: c.height,
                         levels: c.levels,
+                        opaque,
                     })
                 })
                 .collect::<Result<Vec<_>>>()?;

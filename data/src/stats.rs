@@ -86,6 +86,9 @@ pub struct DbStats {
     pub mip_bytes: u64,
     /// What those segments give decoded (RGBA8; every segment a whole chain).
     pub mip_texel_bytes: u64,
+    /// What they hold on a GPU with BC textures (BC1 opaque, BC3 with alpha, RGBA8 where the
+    /// size is not whole 4 × 4 blocks): [`crate::texture::MipSegment::gpu_bytes`].
+    pub mip_block_bytes: u64,
     /// Bytes of the material textures' coarse segments: what a first view of every textured
     /// object costs.
     pub coarse_mip_bytes: u64,
@@ -195,6 +198,12 @@ pub fn stats(db: &Database) -> DbStats {
             .iter()
             .flat_map(|t| &t.segments)
             .map(|s| s.texel_bytes())
+            .sum(),
+        mip_block_bytes: h
+            .textures
+            .iter()
+            .flat_map(|t| &t.segments)
+            .map(|s| s.gpu_bytes(crate::texture::TexelFormat::Block))
             .sum(),
         coarse_mip_bytes: h
             .textures
@@ -367,11 +376,12 @@ impl DbStats {
         }
         if self.textures > 0 {
             s.push_str(&format!(
-                "\n  textures {}: {:.1} MB of mip segments ({:.0} % of the file; {:.1} MB decoded, every segment a whole chain), {:.2} MB of them coarse, {}\n",
+                "\n  textures {}: {:.1} MB of mip segments ({:.0} % of the file; {:.1} MB decoded as RGBA8, {:.1} MB block-compressed, every segment a whole chain), {:.2} MB of them coarse, {}\n",
                 self.textures,
                 self.mip_bytes as f64 / 1e6,
                 100.0 * self.mip_bytes as f64 / self.file_bytes.max(1) as f64,
                 self.mip_texel_bytes as f64 / 1e6,
+                self.mip_block_bytes as f64 / 1e6,
                 self.coarse_mip_bytes as f64 / 1e6,
                 self.texture_psnr.map_or("all lossless".to_string(), |p| format!("PSNR at least {p:.1} dB")),
             ));

@@ -6,7 +6,7 @@ use portico_data::Database;
 use portico_data::build::{BuildOptions, Quiet, build};
 use portico_data::format::SegmentKind;
 use portico_data::import::import_file;
-use portico_data::texture::{Wrap, decode_segment};
+use portico_data::texture::{TexelFormat, Wrap, decode_segment};
 use std::path::{Path, PathBuf};
 
 mod common;
@@ -144,6 +144,22 @@ fn a_built_database_holds_each_texture_coarse_first_as_whole_mip_chains() {
             "{} bytes",
             bytes.len()
         );
+    }
+    // What a client's cache is charged for them: what its GPU holds, not the coded bytes.
+    // With BC textures, the coarse segment (52 texels: whole 4 × 4 blocks) as BC blocks; 105
+    // and 211 texels are not whole blocks, so they stay RGBA8.
+    let wire: Vec<u64> = db.segments().iter().map(|e| e.length).collect();
+    let rgba = h.cache_charges(&wire, TexelFormat::Rgba8);
+    let block = h.cache_charges(&wire, TexelFormat::Block);
+    for s in &t.segments {
+        let (r, b) = (rgba[s.segment as usize], block[s.segment as usize]);
+        assert_eq!(r, s.texel_bytes());
+        assert_eq!(b, s.gpu_bytes(TexelFormat::Block));
+        if s.width == 52 {
+            assert!(b * 4 <= r, "{b} of {r}");
+        } else {
+            assert_eq!(b, r, "{} texels", s.width);
+        }
     }
     // The coarse segment is small: what arrives with the first geometry.
     let coarse = db.segment(t.segments[0].segment).unwrap().len();

@@ -160,6 +160,11 @@ pub struct Policy {
     pub cache_bytes: u64,
     /// The client draws clusters as impostors: list their textured boxes before geometry.
     pub impostors: bool,
+    /// The client's GPU holds textures block-compressed (BC1 opaque, BC3 with alpha: half a
+    /// byte or one byte per texel) rather than RGBA8: texture segments count that much
+    /// against [`Policy::cache_bytes`]. Optional in JSON (default `false`).
+    #[serde(default)]
+    pub block_textures: bool,
 }
 
 impl Default for Policy {
@@ -175,6 +180,7 @@ impl Default for Policy {
             read_bytes: 4 << 20,
             cache_bytes: 64 << 20,
             impostors: false,
+            block_textures: false,
         }
     }
 }

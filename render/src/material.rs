@@ -5,7 +5,9 @@
 
 use crate::pipeline::{Blending, surface_pipeline, vertex_layouts};
 use crate::{RenderError, extent};
-use portico_data::texture::{Wrap, decode_segment};
+use portico_data::texture::{
+    BlockFormat, TexelFormat, Wrap, block_format, compress, decode_segment, is_opaque,
+};
 use wgpu::util::DeviceExt;
 
 /// One texture segment on the GPU (a mip chain from its finest level down), with the bind
@@ -14,13 +16,15 @@ use wgpu::util::DeviceExt;
 pub struct GpuTexture {
     pub(crate) bind_group: wgpu::BindGroup,
     bytes: u64,
+    texel_bytes: u64,
     width: u32,
     /// Charged to the renderer's account of GPU memory held while the texture lives.
     _held: crate::held::Charge,
 }
 
 impl GpuTexture {
-    /// GPU memory held by the texels (bytes): the segment's levels, RGBA8.
+    /// GPU memory held by the texels (bytes): the segment's levels, RGBA8 or block-compressed
+    /// ([`crate::Renderer::texel_format`]).
     pub fn gpu_bytes(&self) -> u64 {
         self.bytes
     }
@@ -28,6 +32,12 @@ impl GpuTexture {
     /// Width of its finest level (texels).
     pub fn width(&self) -> u32 {
         self.width
+    }
+
+    /// Bytes its levels take as RGBA8 texels: what it decoded to before any block
+    /// compression.
+    pub fn texel_bytes(&self) -> u64 {
+        self.texel_bytes
     }
 }
 
@@ -128,7 +138,9 @@ impl Materials {
     }
 
     /// Decodes a texture segment (raw, PNG or JPEG: [`decode_segment`]) and uploads its whole
-    /// mip chain, in one texture, to be sampled with `wrap`, charged to `held`.
+    /// mip chain, in one texture, to be sampled with `wrap`, charged to `held`: compressed to
+    /// BC1 (opaque) or BC3 first where the device takes BC textures and the size is whole
+    /// 4 × 4 blocks ([`portico_data::texture::compress`]), else as RGBA8.
     pub(crate) fn upload(
         &self,
         device: &wgpu::Device,
@@ -147,6 +159,20 @@ impl Materials {
                 view.width, view.height
             )));
         }
+        // Transcoded here too (van Waveren's real-time DXT: the wire keeps the smaller codec).
+        let opaque = is_opaque(&view.texels);
+        let blocks = block_format(texel_format(device), view.width, view.height, opaque)
+            .and_then(|f| compress(&view, f));
+        let (format, texels) = match &blocks {
+            Some(b) => (
+                match b.format {
+                    BlockFormat::Bc1 => wgpu::TextureFormat::Bc1RgbaUnormSrgb,
+                    BlockFormat::Bc3 => wgpu::TextureFormat::Bc3RgbaUnormSrgb,
+                },
+                &b.bytes,
+            ),
+            None => (wgpu::TextureFormat::Rgba8UnormSrgb, &view.texels),
+        };
         let texture = device.create_texture_with_data(
             queue,
             &wgpu::TextureDescriptor {
@@ -155,12 +181,12 @@ impl Materials {
                 mip_level_count: view.levels,
                 sample_count: 1,
                 dimension: wgpu::TextureDimension::D2,
-                format: wgpu::TextureFormat::Rgba8UnormSrgb,
+                format,
                 usage: wgpu::TextureUsages::TEXTURE_BINDING,
                 view_formats: &[],
             },
             wgpu::util::TextureDataOrder::MipMajor,
-            &view.texels,
+            texels,
         );
         let address = |w: Wrap| match w {
             Wrap::Repeat => wgpu::AddressMode::Repeat,
@@ -179,12 +205,25 @@ impl Materials {
         let tv = texture.create_view(&Default::default());
         let bind_group =
             crate::pipeline::texture_bind_group(device, &self.layout, "base colour", &tv, &sampler);
-        let bytes = view.texels.len() as u64;
+        let bytes = texels.len() as u64;
         Ok(GpuTexture {
             bind_group,
             bytes,
+            texel_bytes: view.texels.len() as u64,
             width: view.width,
             _held: held.charge(bytes),
         })
+    }
+}
+
+/// How `device` holds textures: block-compressed when it was given BC texture compression.
+pub(crate) fn texel_format(device: &wgpu::Device) -> TexelFormat {
+    if device
+        .features()
+        .contains(wgpu::Features::TEXTURE_COMPRESSION_BC)
+    {
+        TexelFormat::Block
+    } else {
+        TexelFormat::Rgba8
     }
 }

@@ -12,6 +12,7 @@ use crate::{
 };
 use glam::{Mat4, Vec3};
 use portico_data::geometry::Aabb;
+use portico_data::texture::TexelFormat;
 use std::sync::Arc;
 use web_time::Instant;
 
@@ -84,6 +85,7 @@ impl Renderer {
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("portico"),
                 required_limits: adapter.limits(),
+                required_features: block_features(adapter),
                 ..Default::default()
             })
             .await?;
@@ -181,6 +183,13 @@ impl Renderer {
     /// created and that are still alive, wherever they are kept (bytes).
     pub fn gpu_bytes_held(&self) -> u64 {
         self.held.bytes()
+    }
+
+    /// How this renderer's GPU holds textures: block-compressed (BC1 / BC3) where the adapter
+    /// takes BC textures, else RGBA8 ([`portico_data::texture::TexelFormat`]). What a texture
+    /// segment costs a client's cache follows it.
+    pub fn texel_format(&self) -> TexelFormat {
+        crate::material::texel_format(&self.device)
     }
 
     /// Samples per pixel (1, or 4 with MSAA).
@@ -636,5 +645,18 @@ fn msaa_from_env() -> Option<u32> {
             tracing::warn!("PORTICO_MSAA={other} ignored: samples per pixel are 1 or 4");
             None
         }
+    }
+}
+
+/// The features a device asks of `adapter`: BC texture compression where it offers it (desktop
+/// GPUs, llvmpipe, WebGPU and WebGL2 with S3TC), unless `PORTICO_TEXELS=rgba8` says to hold
+/// textures as RGBA8 (to compare the two).
+fn block_features(adapter: &wgpu::Adapter) -> wgpu::Features {
+    let wanted = wgpu::Features::TEXTURE_COMPRESSION_BC;
+    let rgba8 = std::env::var("PORTICO_TEXELS").is_ok_and(|v| v.eq_ignore_ascii_case("rgba8"));
+    if rgba8 {
+        wgpu::Features::empty()
+    } else {
+        adapter.features() & wanted
     }
 }

@@ -218,3 +218,45 @@ fn cut_outs_drop_transparent_texels_and_blends_mix() {
         assert!(got.abs_diff(want) <= 3, "{mixed:?}");
     }
 }
+
+/// A texture a client holds: its GPU bytes are what its segment record says it costs the
+/// cache, and on an adapter with BC textures (llvmpipe has them) at most a byte per texel of
+/// its finest level plus the coarser levels' third.
+#[test]
+fn textures_are_held_block_compressed_where_the_adapter_takes_bc() {
+    use portico_data::texture::{MipSegment, TexelFormat, full_levels};
+    let r = renderer();
+    let offered = r.adapter_info().to_ascii_lowercase().contains("llvmpipe");
+    eprintln!("{}: {:?}", r.adapter_info(), r.texel_format());
+    if offered {
+        assert_eq!(r.texel_format(), TexelFormat::Block, "llvmpipe offers BC");
+    }
+    let (w, h) = (64, 32);
+    for alpha in [255u8, 128] {
+        let img = TextureImage {
+            name: "ramp".into(),
+            width: w,
+            height: h,
+            rgba: (0..w * h)
+                .flat_map(|i| [(i % w * 4) as u8, (i / w * 8) as u8, 90, alpha])
+                .collect(),
+            wrap: [Wrap::Repeat; 2],
+        };
+        let gpu = upload(&r, &img);
+        let record = MipSegment {
+            segment: 0,
+            width: w,
+            height: h,
+            levels: full_levels(w, h),
+            opaque: alpha == 255,
+        };
+        assert_eq!(gpu.gpu_bytes(), record.gpu_bytes(r.texel_format()));
+        if r.texel_format() == TexelFormat::Block {
+            let per_texel = if alpha == 255 { 0.5 } else { 1.0 };
+            let most = (w * h) as f64 * per_texel * 4.0 / 3.0 + 64.0;
+            assert!(gpu.gpu_bytes() as f64 <= most, "{} bytes", gpu.gpu_bytes());
+        } else {
+            assert_eq!(gpu.gpu_bytes(), record.texel_bytes());
+        }
+    }
+}

@@ -29,6 +29,27 @@ pub fn build_tiny_with(dir: &Path, opts: &BuildOptions) -> PathBuf {
     db
 }
 
+/// The tiny building with the generator's textured materials (`dir/textured.portico`).
+pub fn build_tiny_textured(dir: &Path) -> PathBuf {
+    let params = portico_generator::Params {
+        preset: portico_generator::Preset::Tiny,
+        seed: 2,
+        floors: Some(1),
+    };
+    let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
+    let glb = dir.join("textured.glb");
+    std::fs::write(&glb, portico_generator::with_textures(&b.glb).unwrap()).unwrap();
+    let db = dir.join("textured.portico");
+    build(
+        import_file(&glb).unwrap(),
+        &db,
+        &BuildOptions::default(),
+        &Quiet,
+    )
+    .unwrap();
+    db
+}
+
 /// Builds the tiny building into `dir` and serves it on a background runtime; returns the base
 /// URL, the server's state (for its metrics) and the database file.
 pub fn serve_tiny(dir: &Path) -> (String, Arc<AppState>, PathBuf) {

@@ -164,10 +164,6 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         .iter()
         .flat_map(|t| t.segments.iter().map(move |s| (s.segment, t.wrap)))
         .collect();
-    let catalogue = Catalogue {
-        segments: manifest.segments,
-        decoded: header.decoded_sizes().collect(),
-    };
 
     // WebGL2 guarantees 2048-pixel textures; the device's own limit applies from then on.
     let (width, height) = canvas_size(&canvas, 2048);
@@ -224,9 +220,16 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
     config.present_mode = wgpu::PresentMode::AutoVsync;
     surface.configure(renderer.device(), &config);
 
+    // What a texture costs the cache follows what the GPU holds it as (BC where offered).
+    let texels = renderer.texel_format();
+    let catalogue = Catalogue {
+        segments: manifest.segments,
+        decoded: header.decoded_sizes(texels).collect(),
+    };
     let (cache_bytes, window_bytes) = split_budget(cache_mb.max(1) << 20);
     let policy = Policy {
         cache_bytes,
+        block_textures: texels == portico_data::texture::TexelFormat::Block,
         screen: [width, height],
         frame_time_s: (budget_ms / 1e3) as f32,
         ..Policy::default()
@@ -254,6 +257,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
             cache_budget: cache_bytes,
             budget_bytes: cache_mb << 20,
             backend: backend_name,
+            texel_format: format!("{texels:?}"),
             ..Stats::default()
         },
         recent: Default::default(),

@@ -108,6 +108,18 @@ pub struct Stats {
     pub transport: &'static str,
     /// Stream sessions opened so far.
     pub stream_sessions: u64,
+    /// How the GPU holds textures: `Block` (BC1 / BC3, where the adapter takes them) or
+    /// `Rgba8`.
+    pub texel_format: String,
+    /// Texture segments decoded and uploaded so far.
+    pub texture_segments: u64,
+    /// Milliseconds the page spent on them (image decode, mip chain, BC re-coding, upload):
+    /// time taken from its one thread between frames.
+    pub texture_ms: f64,
+    /// Bytes of RGBA8 texels those segments decoded to.
+    pub texture_texel_bytes: u64,
+    /// Bytes they hold on the GPU (a quarter or an eighth of the texels when block-compressed).
+    pub texture_gpu_bytes: u64,
 }
 
 /// The viewer's state between frames.
@@ -150,13 +162,21 @@ impl Viewer {
                             .map(|l| (Resident::Stab(Arc::new(l)), bytes.len() as u64))
                             .map_err(|e| format!("segment {id}: {e}"))
                     } else if let Some(wrap) = self.model.mips.get(&id) {
-                        self.renderer
-                            .upload_texture(&bytes, *wrap)
-                            .map(|t| {
-                                let charge = t.gpu_bytes().max(bytes.len() as u64);
-                                (Resident::Texture(t), charge)
-                            })
-                            .map_err(|e| format!("segment {id}: {e}"))
+                        let t0 = web_time::Instant::now();
+                        let made = self.renderer.upload_texture(&bytes, *wrap);
+                        if let Ok(t) = &made {
+                            let s = &mut self.stats;
+                            s.texture_segments += 1;
+                            s.texture_ms += t0.elapsed().as_secs_f64() * 1e3;
+                            s.texture_texel_bytes += t.texel_bytes();
+                            s.texture_gpu_bytes += t.gpu_bytes();
+                        }
+                        made.map(|t| {
+                            // What the GPU holds: the coded image is dropped.
+                            let charge = t.gpu_bytes();
+                            (Resident::Texture(t), charge)
+                        })
+                        .map_err(|e| format!("segment {id}: {e}"))
                     } else {
                         // A compressed segment is decoded here (the page has one thread),
                         // after its counts are checked against its LOD record.

@@ -118,9 +118,13 @@ impl InstanceRecord {
 
 impl Header {
     /// Every LOD's geometry segment and every texture segment with the bytes it occupies
-    /// decoded ([`crate::geometry::plain_size`], [`crate::texture::MipSegment::texel_bytes`]):
-    /// a compressed segment's wire length says less, and a cache is charged what it decodes to.
-    pub fn decoded_sizes(&self) -> impl Iterator<Item = (u32, u64)> + '_ {
+    /// decoded on a GPU that holds texels as `texels` ([`crate::geometry::plain_size`],
+    /// [`crate::texture::MipSegment::gpu_bytes`]): a compressed segment's wire length says
+    /// less, and a cache is charged what it decodes to.
+    pub fn decoded_sizes(
+        &self,
+        texels: crate::texture::TexelFormat,
+    ) -> impl Iterator<Item = (u32, u64)> + '_ {
         self.objects
             .iter()
             .flat_map(|o| &o.lods)
@@ -135,8 +139,28 @@ impl Header {
                 self.textures
                     .iter()
                     .flat_map(|t| &t.segments)
-                    .map(|s| (s.segment, s.texel_bytes())),
+                    .map(move |s| (s.segment, s.gpu_bytes(texels))),
             )
+    }
+
+    /// What each segment costs a client's cache on a GPU that holds texels as `texels`, by
+    /// id, from the segments' `wire` lengths: a texture segment its GPU bytes (the coded image
+    /// is dropped once decoded), a geometry segment the larger of its wire and decoded sizes,
+    /// anything else its wire length. The server's lookahead and the load tester both count
+    /// with it, so that they agree with the clients.
+    pub fn cache_charges(&self, wire: &[u64], texels: crate::texture::TexelFormat) -> Vec<u64> {
+        let mut charges = wire.to_vec();
+        for (seg, plain) in self.decoded_sizes(texels) {
+            if let Some(c) = charges.get_mut(seg as usize) {
+                *c = (*c).max(plain);
+            }
+        }
+        for s in self.textures.iter().flat_map(|t| &t.segments) {
+            if let Some(c) = charges.get_mut(s.segment as usize) {
+                *c = s.gpu_bytes(texels);
+            }
+        }
+        charges
     }
 
     /// The LODs an instance draws with: its own, else its definition's (finest first).

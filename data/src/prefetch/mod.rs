@@ -23,6 +23,7 @@ use crate::cells::{CellGraph, StabList};
 use crate::error::Result;
 use crate::format::SegmentKind;
 use crate::geometry::Aabb;
+use crate::texture::TexelFormat;
 use portico_protocol::{
     LookaheadCull, NeedItem, NeedKind, Observer, PROTOCOL_VERSION, Policy, PrefetchResponse,
 };
@@ -103,9 +104,9 @@ pub struct Prefetcher {
     graph: Option<CellGraph>,
     stabs: Vec<OnceLock<Arc<StabList>>>,
     bounds: Vec<Aabb>,
-    /// Per segment: the bytes it occupies in a client's cache (decoded geometry, else its
-    /// length).
-    decoded: Vec<u64>,
+    /// Per segment: the bytes it occupies in a client's cache ([`crate::format::Header::cache_charges`]),
+    /// for a client holding textures as RGBA8 (`[0]`) and block-compressed (`[1]`).
+    decoded: [Vec<u64>; 2],
     shared: shared::SharedAnswers,
 }
 
@@ -134,12 +135,9 @@ impl Prefetcher {
         let graph = db.cell_graph()?;
         let n = graph.as_ref().map_or(0, |g| g.cells.len());
         let bounds = db.header().instances.iter().map(|i| i.bounds).collect();
-        let mut decoded: Vec<u64> = db.segments().iter().map(|e| e.length).collect();
-        for (seg, plain) in db.header().decoded_sizes() {
-            if let Some(d) = decoded.get_mut(seg as usize) {
-                *d = (*d).max(plain);
-            }
-        }
+        let wire: Vec<u64> = db.segments().iter().map(|e| e.length).collect();
+        let decoded = [TexelFormat::Rgba8, TexelFormat::Block]
+            .map(|texels| db.header().cache_charges(&wire, texels));
         Ok(Prefetcher {
             db,
             graph,
@@ -248,24 +246,21 @@ impl Prefetcher {
         let mut list = NeedList::ordered(stab_items, cands);
         list.range_cells = ranged;
         list.lookahead_cells = lookahead_cells;
-        self.fit_cache(&mut list, policy.cache_bytes);
+        self.fit_cache(&mut list, policy.cache_bytes, policy.block_textures);
         Ok(list)
     }
 
     /// Sets [`NeedList::fit`] for a cache of `cache_bytes`. When the first geometry item falls
     /// past it, that item becomes mandatory: a cache too small for anything still gets the
     /// first object it would draw (and nothing else past the fit).
-    fn fit_cache(&self, list: &mut NeedList, cache_bytes: u64) {
+    fn fit_cache(&self, list: &mut NeedList, cache_bytes: u64, block_textures: bool) {
+        let decoded = &self.decoded[usize::from(block_textures)];
         let mut used = 0u64;
         list.fit = list
             .items
             .iter()
             .position(|i| {
-                used += self
-                    .decoded
-                    .get(i.segment as usize)
-                    .copied()
-                    .unwrap_or(i.bytes);
+                used += decoded.get(i.segment as usize).copied().unwrap_or(i.bytes);
                 used > cache_bytes
             })
             .unwrap_or(list.items.len());

@@ -267,7 +267,7 @@ impl Prefetcher {
         let mut list = NeedList::ordered(stabs, cands);
         list.range_cells = ranged;
         list.lookahead_cells = cells;
-        self.fit_cache(&mut list, policy.cache_bytes);
+        self.fit_cache(&mut list, policy.cache_bytes, policy.block_textures);
         let list = Arc::new(list);
         self.shared.put(key.clone(), list.clone());
         Ok(list)

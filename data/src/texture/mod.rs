@@ -15,8 +15,14 @@
 //! image of its finest level only, and the client builds the coarser levels from it
 //! ([`code_segments`], [`decode_segment`]: PNG, or JPEG within [`MIN_PSNR`]).
 
+mod block;
 mod mips;
 mod segment;
+
+pub use block::{
+    BlockChain, BlockFormat, TexelFormat, block_chain_bytes, block_format, compress,
+    decompress_finest, is_opaque,
+};
 
 pub use mips::{average_color, mip_chain, to_linear, to_srgb};
 pub use segment::{
@@ -83,6 +89,8 @@ pub struct MipSegment {
     pub height: u32,
     /// Levels in the segment.
     pub levels: u32,
+    /// Every texel's alpha is 255: a GPU with block compression holds it as BC1, else BC3.
+    pub opaque: bool,
 }
 
 impl MipSegment {
@@ -90,6 +98,15 @@ impl MipSegment {
     /// textures.
     pub fn texel_bytes(&self) -> u64 {
         chain_bytes(self.width, self.height, self.levels)
+    }
+
+    /// Bytes its levels take on a GPU that holds texels as `texels` (RGBA8, or BC1 / BC3 where
+    /// [`block_format`] allows): what a client's cache is charged for it.
+    pub fn gpu_bytes(&self, texels: TexelFormat) -> u64 {
+        match block_format(texels, self.width, self.height, self.opaque) {
+            Some(f) => block_chain_bytes(self.width, self.height, self.levels, f),
+            None => self.texel_bytes(),
+        }
     }
 
     /// Whether the record describes a chain [`decode_segment`] would accept: each side
@@ -180,6 +197,7 @@ mod tests {
             width: u32::MAX,
             height: u32::MAX,
             levels: u32::MAX,
+            opaque: true,
         };
         assert!(!s.is_valid());
         assert!(s.texel_bytes() > 0);
@@ -189,6 +207,7 @@ mod tests {
             width: 64,
             height: 16,
             levels: 7,
+            opaque: false,
         };
         assert!(ok.is_valid());
         assert!(!MipSegment { levels: 8, ..ok }.is_valid());
@@ -208,6 +227,7 @@ mod tests {
                     width: s,
                     height: s,
                     levels: full_levels(s, s),
+                    opaque: true,
                 })
                 .collect(),
             average: [0.5; 4],

@@ -47,6 +47,7 @@ pub use sweep::{UnknownSweep, grid};
 
 use anyhow::{Context, Result, bail};
 use portico_data::path::CameraPath;
+use portico_data::texture::TexelFormat;
 pub use portico_native::stream::Transport;
 use portico_protocol::Policy;
 use runner::run_all;
@@ -129,6 +130,15 @@ impl LoadtestConfig {
             })
     }
 
+    /// How the clients hold textures: block-compressed when the first policy says so (`bc=1`);
+    /// every run of the session, the baselines too, then holds them so.
+    pub fn texels(&self) -> TexelFormat {
+        match self.policies.first() {
+            Some((_, p)) if p.block_textures => TexelFormat::Block,
+            _ => TexelFormat::Rgba8,
+        }
+    }
+
     /// The runs in order: the policies, then the baselines.
     fn runs(&self) -> Vec<(String, Mode)> {
         let mut runs: Vec<(String, Mode)> = Vec::new();
@@ -138,6 +148,7 @@ impl LoadtestConfig {
                 cache_bytes: portico_client::cache::split_budget(self.cache_bytes).0,
                 frame_time_s: self.budget_s as f32,
                 screen: [world::SCREEN.0, world::SCREEN.1],
+                block_textures: self.texels() == TexelFormat::Block,
                 ..*p
             };
             for &t in &self.transports {

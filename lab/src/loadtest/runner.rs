@@ -32,6 +32,7 @@ pub(super) async fn run_all(
             0
         },
         size_threshold_px: cfg.size_threshold_px(),
+        texels: cfg.texels(),
     };
     let world = Arc::new(world::load(&remote, &cfg.path, plan).await?);
     // Last session's drawn frames would pass for this one's.

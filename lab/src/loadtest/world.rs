@@ -15,6 +15,7 @@ use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::Header;
 use portico_data::geometry::Aabb;
 use portico_data::path::CameraPath;
+use portico_data::texture::TexelFormat;
 use portico_native::net::Remote;
 use portico_protocol::Observer;
 use std::collections::{HashMap, HashSet};
@@ -190,18 +191,16 @@ pub struct Plan {
     pub lookahead: u64,
     /// See [`World::size_threshold_px`].
     pub size_threshold_px: f32,
+    /// How the clients hold textures (what a texture segment costs their caches).
+    pub texels: TexelFormat,
 }
 
 /// Fetches the model and the stab lists along the path, and computes the oracle's truth.
 pub async fn load(remote: &Remote, path: &CameraPath, plan: Plan) -> Result<World> {
     let (m, graph) = remote.model().await.context("loading the model")?;
     let far = view::far_plane(&m.header.bounds);
-    let mut decoded_bytes: Vec<u64> = m.segments.iter().map(|s| s.bytes).collect();
-    for (seg, size) in m.header.decoded_sizes() {
-        if let Some(b) = decoded_bytes.get_mut(seg as usize) {
-            *b = (*b).max(size);
-        }
-    }
+    let wire: Vec<u64> = m.segments.iter().map(|s| s.bytes).collect();
+    let decoded_bytes = m.header.cache_charges(&wire, plan.texels);
     let mut world = World {
         bounds: m.header.instances.iter().map(|i| i.bounds).collect(),
         chains: super::waste::Chains::new(&m.header, m.segments.iter().map(|s| s.kind).collect()),

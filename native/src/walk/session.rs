@@ -12,6 +12,7 @@ use glam::Vec3;
 use portico_client::elision::Algorithm;
 use portico_client::stats::FrameRow;
 use portico_client::view;
+use portico_data::texture::TexelFormat;
 use portico_protocol::{Observer, Policy};
 use portico_render::Renderer;
 use std::time::Instant;
@@ -40,7 +41,8 @@ impl<'a> Session<'a> {
     pub fn open_on(cfg: &'a WalkConfig, mut renderer: Renderer) -> Result<Session<'a>> {
         let start = Instant::now();
         let remote = Remote::new(&cfg.server, cfg.token.clone())?;
-        let (model, pages) = load_model(&remote, cfg.paged)?;
+        let texels = renderer.texel_format();
+        let (model, pages) = load_model(&remote, cfg.paged, texels)?;
         let cost = portico_render::calibrate(&mut renderer)?;
         let (cache_bytes, window) = portico_client::cache::split_budget(cfg.cache_bytes);
         let policy = Policy {
@@ -48,6 +50,7 @@ impl<'a> Session<'a> {
             cache_bytes,
             screen: [cfg.size.0, cfg.size.1],
             frame_time_s: cfg.budget_s as f32,
+            block_textures: texels == TexelFormat::Block,
             ..cfg.policy
         };
         let io = IoStage::start(
@@ -173,7 +176,11 @@ impl Drop for Session<'_> {
 /// Reads what the first frame needs: the core manifest (the instances and the cell graph
 /// to follow page by page with the stab lists) when `paged` and the server has it, else the
 /// whole manifest and the cell graph.
-fn load_model(remote: &Remote, paged: bool) -> Result<(Model, Option<PageBook>)> {
+fn load_model(
+    remote: &Remote,
+    paged: bool,
+    texels: TexelFormat,
+) -> Result<(Model, Option<PageBook>)> {
     let t0 = Instant::now();
     let core = if paged {
         crate::net::core_blocking(remote)?
@@ -186,7 +193,15 @@ fn load_model(remote: &Remote, paged: bool) -> Result<(Model, Option<PageBook>)>
             + graph_bytes(graph.as_ref());
         let triangles = m.header.finest_triangles();
         let segments = m.segments;
-        let mut model = model_of(remote, m.header, graph, m.database_id, triangles, segments)?;
+        let mut model = model_of(
+            remote,
+            m.header,
+            graph,
+            m.database_id,
+            triangles,
+            segments,
+            texels,
+        )?;
         model.startup = ("whole".into(), t0.elapsed().as_secs_f64(), bytes);
         return Ok((model, None));
     };
@@ -218,6 +233,7 @@ fn load_model(remote: &Remote, paged: bool) -> Result<(Model, Option<PageBook>)>
         core.database_id,
         core.triangles,
         rows,
+        texels,
     )?;
     model.startup = ("paged".into(), t0.elapsed().as_secs_f64(), bytes);
     Ok((model, Some(book)))
@@ -234,6 +250,7 @@ fn model_of(
     database_id: String,
     model_triangles: u64,
     segments: Vec<portico_protocol::SegmentInfo>,
+    texels: TexelFormat,
 ) -> Result<Model> {
     let bounds: Vec<_> = header.instances.iter().map(|i| i.bounds).collect();
     // Indices from the manifest are used as they are below: check them once.
@@ -263,7 +280,7 @@ fn model_of(
                 .iter()
                 .flat_map(|t| t.segments.iter().map(move |s| (s.segment, t.wrap)))
                 .collect(),
-            decoded: header.decoded_sizes().collect(),
+            decoded: header.decoded_sizes(texels).collect(),
         },
         header,
         graph,

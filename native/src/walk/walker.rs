@@ -126,9 +126,11 @@ impl<'a> Walker<'a> {
                             let gpu = i.gpu_bytes();
                             (Resident::Impostor(i), bytes.max(gpu))
                         }
+                        // What the GPU holds (RGBA8, or BC1 / BC3 where the adapter takes
+                        // them): the coded image is dropped once decoded.
                         Payload::Texture(t) => {
                             let gpu = t.gpu_bytes();
-                            (Resident::Texture(t), bytes.max(gpu))
+                            (Resident::Texture(t), gpu)
                         }
                     };
                     match self.cache.insert(id, value, charge) {
