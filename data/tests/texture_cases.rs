@@ -172,6 +172,40 @@ fn webp_is_decoded_and_ktx2_leaves_its_material_in_colour_with_a_warning() {
     );
 }
 
+/// A real Basis Universal KTX2 (ETC1S, what gltfpack writes) in place of the case's broken
+/// one: transcoded and stored like any other texture, its picture the photograph's.
+#[test]
+fn basis_universal_ktx2_is_transcoded_like_any_other_image() {
+    let dir = tempfile::tempdir().unwrap();
+    let from = case("ktx2-webp");
+    for f in ["house_ktx2_required.gltf", "house_ktx2_required.bin"] {
+        std::fs::copy(from.join(f), dir.path().join(f)).unwrap();
+    }
+    std::fs::create_dir(dir.path().join("tex")).unwrap();
+    for f in ["wall.png", "shared.png", "floor.webp", "wall.webp"] {
+        std::fs::copy(from.join("tex").join(f), dir.path().join("tex").join(f)).unwrap();
+    }
+    std::fs::copy(
+        from.join("basis/kodim23.ktx2"),
+        dir.path().join("tex/inner.ktx2"),
+    )
+    .unwrap();
+    let m = import_file(&dir.path().join("house_ktx2_required.gltf")).unwrap();
+    assert!(m.warnings.is_empty(), "{:?}", m.warnings);
+    let inner = material(&m, "inner").texture.expect("the KTX2 texture");
+    let t = &m.textures[inner as usize];
+    assert_eq!((t.width, t.height), (768, 512));
+    let img = image::RgbaImage::from_raw(t.width, t.height, t.rgba.clone()).unwrap();
+    let small = image::DynamicImage::ImageRgba8(img)
+        .thumbnail_exact(48, 32)
+        .to_rgba8();
+    let want = image::open(from.join("basis/kodim23_48x32.png"))
+        .unwrap()
+        .to_rgba8();
+    let p = portico_data::texture::psnr(want.as_raw(), small.as_raw());
+    assert!(p >= 40.0, "{p:.1} dB against the photograph");
+}
+
 #[test]
 fn emissive_and_unlit_materials_are_read() {
     let m = import("emissive/house_emissive.gltf");

@@ -1,5 +1,8 @@
 //! Material images decoded into textures: every format the `image` crate reads with a pure-Rust
-//! decoder (PNG, JPEG, TGA, BMP, GIF, TIFF, WebP, QOI, PNM, ICO, HDR, DDS), as sRGB RGBA8.
+//! decoder (PNG, JPEG, TGA, BMP, GIF, TIFF, WebP, QOI, PNM, ICO, HDR, DDS), and KTX2 with Basis
+//! Universal supercompression (glTF's `KHR_texture_basisu`, what gltfpack and gltf-transform
+//! write: ETC1S or UASTC, transcoded to RGBA8 by the pure-Rust `basisu` transcoder), as sRGB
+//! RGBA8.
 //!
 //! - The format comes from the content where it has a magic number, else from the name: TGA
 //!   has none, so a `.tga` is read as TGA first (Crytek's Sponza and 3ds Max use it).
@@ -24,7 +27,49 @@ pub const MAX_DECODED_BYTES: u64 = 1 << 30;
 pub const MODEL_TEXELS: u64 = 64 << 20;
 
 /// The names of the formats read, for messages.
-const FORMATS: &str = "PNG, JPEG, TGA, BMP, GIF, TIFF, WebP, QOI, PNM, ICO, HDR or DDS";
+const FORMATS: &str = "PNG, JPEG, TGA, BMP, GIF, TIFF, WebP, QOI, PNM, ICO, HDR, DDS or KTX2";
+
+/// The first bytes of every KTX2 file.
+const KTX2_MAGIC: [u8; 12] = [
+    0xAB, b'K', b'T', b'X', b' ', b'2', b'0', 0xBB, b'\r', b'\n', 0x1A, b'\n',
+];
+
+/// A KTX2 file opened for transcoding (its base level's size checked), or `None` for other
+/// bytes.
+fn ktx2(bytes: &[u8]) -> Option<Result<(basisu::Transcoder<'_>, u32, u32), String>> {
+    if !bytes.starts_with(&KTX2_MAGIC) {
+        return None;
+    }
+    let what = "KTX2 (KHR_texture_basisu)";
+    Some(
+        basisu::Transcoder::new(bytes)
+            .map_err(|e| {
+                format!("{what}: not a Basis Universal texture this build transcodes ({e:?})")
+            })
+            .and_then(|t| {
+                let (w, h) = t.base_dimensions();
+                if w == 0 || h == 0 || w > MAX_DECODED_SIDE || h > MAX_DECODED_SIDE {
+                    return Err(format!(
+                        "{what}: a {w}x{h} image is beyond what is read ({MAX_DECODED_SIDE} a side)"
+                    ));
+                }
+                Ok((t, w, h))
+            }),
+    )
+}
+
+/// A KTX2 file's base level as RGBA8 ([`ktx2`]).
+fn decode_ktx2(bytes: &[u8]) -> Option<Result<image::DynamicImage, String>> {
+    let opened = ktx2(bytes)?;
+    Some(opened.and_then(|(t, w, h)| {
+        let rgba = t
+            .transcode(0, basisu::TargetFormat::Rgba32, basisu::DecodeFlags::NONE)
+            .map_err(|e| format!("KTX2 (KHR_texture_basisu): {e:?}"))?;
+        image::RgbaImage::from_raw(w, h, rgba)
+            .map(image::DynamicImage::ImageRgba8)
+            .ok_or_else(|| "KTX2 (KHR_texture_basisu): its base level is short".to_string())
+    }))
+}
 
 /// A reader of `bytes` in the format the content says, else the name's extension (TGA, which
 /// has no magic number, by its extension first unless `content_first`).
@@ -57,6 +102,9 @@ fn reader<'a>(
 /// The size of image `bytes` named `name` (texels), read from its header without decoding.
 /// Errors say what is wrong in one line, without the name.
 pub fn dimensions(name: &str, bytes: &[u8]) -> Result<(u32, u32), String> {
+    if let Some(k) = ktx2(bytes) {
+        return k.map(|(_, w, h)| (w, h));
+    }
     // A `.tga` that is another format after all is read by its content.
     let (w, h) = reader(name, bytes, false)?
         .into_dimensions()
@@ -131,10 +179,13 @@ pub fn decode(
     wrap: [Wrap; 2],
     scale: f64,
 ) -> Result<TextureImage, String> {
-    let img = reader(name, bytes, false)?
-        .decode()
-        .map_err(|e| e.to_string())
-        .or_else(|e| reader(name, bytes, true)?.decode().map_err(|_| e))?;
+    let img = match decode_ktx2(bytes) {
+        Some(k) => k?,
+        None => reader(name, bytes, false)?
+            .decode()
+            .map_err(|e| e.to_string())
+            .or_else(|e| reader(name, bytes, true)?.decode().map_err(|_| e))?,
+    };
     let (w, h) = (img.width(), img.height());
     let (nw, nh) = fitted(w, h, scale);
     let img = if (nw, nh) != (w, h) {

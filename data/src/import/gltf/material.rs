@@ -7,7 +7,7 @@
 //! a texture whose only image is in `EXT_texture_webp` is read from there. Every image is sized
 //! first and the model's textures are scaled together to one budget
 //! ([`crate::import::image::fit`]). An image that is missing or does not decode (a KTX2 image
-//! of `KHR_texture_basisu`) is named in a warning and its material keeps its colour: never a
+//! that is not Basis Universal, an AVIF) is named in a warning and its material keeps its colour: never a
 //! failed import.
 
 use super::buffers::{Views, data_uri};
@@ -257,7 +257,7 @@ fn uv_map(set: u32, ext: &Value, wrap: [Wrap; 2]) -> UvMap {
 }
 
 /// glTF texture `t`'s image index and its sampler's wrap modes: its `source`, else its
-/// `EXT_texture_webp` image. An image only in KTX2 (`KHR_texture_basisu`) or another
+/// `EXT_texture_webp` or `KHR_texture_basisu` (KTX2) image. An image only in another
 /// extension is an error naming the extension.
 fn texture_source(root: &json::Root, raw: &Value, t: usize) -> Result<(usize, [Wrap; 2]), String> {
     let tex = root
@@ -273,15 +273,10 @@ fn texture_source(root: &json::Root, raw: &Value, t: usize) -> Result<(usize, [W
         return Ok((source as usize, wrap));
     }
     let ext = &traw["extensions"];
-    if let Some(source) = ext["EXT_texture_webp"]["source"].as_u64() {
-        return Ok((source as usize, wrap));
-    }
-    if ext["KHR_texture_basisu"].is_object() {
-        return Err(
-            "its only image is KTX2 with Basis Universal (KHR_texture_basisu), which \
-                    this build does not decode"
-                .into(),
-        );
+    for image_ext in ["EXT_texture_webp", "KHR_texture_basisu"] {
+        if let Some(source) = ext[image_ext]["source"].as_u64() {
+            return Ok((source as usize, wrap));
+        }
     }
     let names: Vec<&str> = ext
         .as_object()
