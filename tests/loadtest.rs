@@ -532,3 +532,45 @@ fn push_and_pull_run_in_one_session_and_push_skips_no_more() {
         mb(o)
     );
 }
+
+/// The textured building with its texture segments cut into 4 KiB parts: every client of every
+/// run (prefetch pulled and pushed, demand fetch, the oracle) asks for the parts with their
+/// heads, joins them and draws the textures.
+#[test]
+fn every_client_joins_texture_parts_and_draws_the_textures() {
+    let _alone = alone();
+    let dir = tempfile::tempdir().unwrap();
+    let db = common::build_tiny_textured(dir.path());
+    let cut = {
+        let d = portico_data::Database::open(&db).unwrap();
+        d.header()
+            .textures
+            .iter()
+            .flat_map(|t| &t.segments)
+            .filter(|s| s.parts > 0)
+            .map(|s| s.segment)
+            .collect::<std::collections::HashSet<u32>>()
+    };
+    assert!(cut.len() >= 4, "{} texture segments in parts", cut.len());
+    let (server, _) = common::serve_db(&db);
+    let out = dir.path().join("lt");
+    let mut cfg = config(server, tour(&db), out.clone());
+    cfg.clients = 1;
+    cfg.transports = vec![Transport::Pull, Transport::Push];
+    let s = run(&cfg, &mut |_, _| {}).unwrap();
+    for p in &s.policies {
+        let file = portico_lab::loadtest::drawn_file(&p.name);
+        let log = DrawnLog::read(&out.join("drawn").join(&file)).unwrap();
+        let joined = log
+            .frames
+            .iter()
+            .flat_map(|f| &f.objects)
+            .filter(|o| o.texture.is_some_and(|t| cut.contains(&t)))
+            .count();
+        assert!(
+            joined > 0,
+            "{}: no texture joined from its parts was drawn",
+            p.name
+        );
+    }
+}

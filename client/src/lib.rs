@@ -27,6 +27,7 @@ pub mod elision;
 pub mod frame;
 pub mod navigate;
 pub mod pacing;
+pub mod parts;
 pub mod policy;
 pub mod schedule;
 pub mod stats;

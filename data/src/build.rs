@@ -19,7 +19,7 @@ use crate::geometry::{Aabb, encode_geometry};
 use crate::hierarchy::{self, Hierarchy, ImpostorPainter, PaintItem};
 use crate::lod::{LodMesh, complete_lods};
 use crate::model::{Instance, Model};
-use crate::texture::{self, MipSegment, TextureImage, TextureRecord};
+use crate::texture::{self, TextureImage};
 use glam::Mat4;
 use rayon::prelude::*;
 use std::path::Path;
@@ -42,6 +42,9 @@ pub struct BuildOptions {
     pub no_hierarchy: bool,
     /// Write geometry segments quantised and meshopt-encoded ([`crate::codec`]).
     pub compress: bool,
+    /// Most bytes of a texture segment or part ([`texture::PART_BYTES`] when `None`; at least
+    /// [`texture::MIN_PART_BYTES`]): smaller for slower links.
+    pub part_bytes: Option<usize>,
 }
 
 /// Receives progress from long build steps (the CLI draws progress bars with it).
@@ -144,7 +147,11 @@ pub fn build_with(
 
     let t1 = Instant::now();
     let mut w = DbWriter::create(out)?;
-    let texture_records = write_textures(&mut w, &textures, obs)?;
+    let part = opts
+        .part_bytes
+        .unwrap_or(texture::PART_BYTES)
+        .max(texture::MIN_PART_BYTES);
+    let texture_records = texture::write_textures(&mut w, &textures, part, obs)?;
     let objects = write_objects(&mut w, &lods, opts, obs)?;
     let records = if opts.flatten {
         write_flattened(&mut w, &lods, &instances, opts.compress, obs)?
@@ -521,50 +528,6 @@ fn write_lod(w: &mut DbWriter, l: &LodMesh, bytes: Vec<u8>, error: f32) -> Resul
         error,
         uv: l.mesh.has_uvs(),
     })
-}
-
-/// Writes each texture's mip chain as coded segments, coarsest first ([`crate::texture`]:
-/// PNG, or JPEG within [`texture::MIN_PSNR`]), and returns their header records.
-fn write_textures(
-    w: &mut DbWriter,
-    textures: &[TextureImage],
-    obs: &dyn Observer,
-) -> Result<Vec<TextureRecord>> {
-    if textures.is_empty() {
-        return Ok(Vec::new());
-    }
-    obs.stage("textures", textures.len() as u64);
-    textures
-        .iter()
-        .map(|t| {
-            let chain = texture::mip_chain(t.width, t.height, &t.rgba);
-            let coded = texture::code_segments(t.width, t.height, &chain);
-            let psnr = coded.iter().map(|c| c.psnr).fold(f64::INFINITY, f64::min);
-            let opaque = texture::is_opaque(&t.rgba);
-            let segments = coded
-                .into_iter()
-                .map(|c| {
-                    Ok(MipSegment {
-                        segment: w.add_segment(SegmentKind::Mips, &c.bytes)?,
-                        width: c.width,
-                        height: c.height,
-                        levels: c.levels,
-                        opaque,
-                    })
-                })
-                .collect::<Result<Vec<_>>>()?;
-            obs.advance(1);
-            Ok(TextureRecord {
-                name: t.name.clone(),
-                width: t.width,
-                height: t.height,
-                segments,
-                average: texture::average_color(&t.rgba),
-                wrap: t.wrap,
-                psnr: psnr.is_finite().then_some(psnr as f32),
-            })
-        })
-        .collect()
 }
 
 /// The header record of an instance; flattened instances get their own LODs and identity.

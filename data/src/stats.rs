@@ -92,6 +92,9 @@ pub struct DbStats {
     /// Bytes of the material textures' coarse segments: what a first view of every textured
     /// object costs.
     pub coarse_mip_bytes: u64,
+    /// The longest texture segment or part on the wire (bytes; [`crate::texture::PART_BYTES`]
+    /// at most): what one of them holds a link for.
+    pub largest_mip_piece: u64,
     /// The lowest PSNR (dB) of any coded texture segment against its texels; `None` when all
     /// are lossless.
     pub texture_psnr: Option<f32>,
@@ -192,7 +195,7 @@ pub fn stats(db: &Database) -> DbStats {
         hierarchy_depth,
         texture_bytes: kind_bytes(SegmentKind::Texture),
         textures: h.textures.len() as u64,
-        mip_bytes: kind_bytes(SegmentKind::Mips),
+        mip_bytes: kind_bytes(SegmentKind::Mips) + kind_bytes(SegmentKind::MipPart),
         mip_texel_bytes: h
             .textures
             .iter()
@@ -209,9 +212,22 @@ pub fn stats(db: &Database) -> DbStats {
             .textures
             .iter()
             .filter_map(|t| t.segments.first())
-            .filter_map(|s| db.segments().get(s.segment as usize))
+            .flat_map(|s| s.ids())
+            .filter_map(|id| db.segments().get(id as usize))
             .map(|e| e.length)
             .sum(),
+        largest_mip_piece: db
+            .segments()
+            .iter()
+            .filter(|e| {
+                matches!(
+                    SegmentKind::from_u16(e.kind),
+                    Some(SegmentKind::Mips | SegmentKind::MipPart)
+                )
+            })
+            .map(|e| e.length)
+            .max()
+            .unwrap_or(0),
         texture_psnr: h
             .textures
             .iter()
@@ -228,7 +244,8 @@ pub fn stats(db: &Database) -> DbStats {
                 bytes: t
                     .segments
                     .iter()
-                    .filter_map(|s| db.segments().get(s.segment as usize))
+                    .flat_map(|s| s.ids())
+                    .filter_map(|id| db.segments().get(id as usize))
                     .map(|e| e.length)
                     .sum(),
                 psnr: t.psnr,
@@ -376,13 +393,14 @@ impl DbStats {
         }
         if self.textures > 0 {
             s.push_str(&format!(
-                "\n  textures {}: {:.1} MB of mip segments ({:.0} % of the file; {:.1} MB decoded as RGBA8, {:.1} MB block-compressed, every segment a whole chain), {:.2} MB of them coarse, {}\n",
+                "\n  textures {}: {:.1} MB of mip segments ({:.0} % of the file; {:.1} MB decoded as RGBA8, {:.1} MB block-compressed, every segment a whole chain), {:.2} MB of them coarse, the longest piece on the wire {:.1} KB, {}\n",
                 self.textures,
                 self.mip_bytes as f64 / 1e6,
                 100.0 * self.mip_bytes as f64 / self.file_bytes.max(1) as f64,
                 self.mip_texel_bytes as f64 / 1e6,
                 self.mip_block_bytes as f64 / 1e6,
                 self.coarse_mip_bytes as f64 / 1e6,
+                self.largest_mip_piece as f64 / 1e3,
                 self.texture_psnr.map_or("all lossless".to_string(), |p| format!("PSNR at least {p:.1} dB")),
             ));
             const LISTED: usize = 12;

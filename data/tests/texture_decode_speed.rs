@@ -15,17 +15,22 @@ use portico_data::texture::{
 fn decode_every_texture_segment() {
     let path = std::env::var("PORTICO_DB").expect("PORTICO_DB names a textured database");
     let db = Database::open(std::path::Path::new(&path)).unwrap();
-    let segments: Vec<(u32, u64)> = db
+    let records: Vec<_> = db
         .header()
         .textures
         .iter()
         .flat_map(|t| &t.segments)
+        .copied()
+        .collect();
+    let segments: Vec<(u32, u64)> = records
+        .iter()
         .map(|s| (s.segment, s.texel_bytes()))
         .collect();
     assert!(!segments.is_empty(), "{path} has no textures");
-    let bytes: Vec<_> = segments
+    // Each joined from its parts, as a client joins them.
+    let bytes: Vec<_> = records
         .iter()
-        .map(|(s, _)| db.segment(*s).unwrap())
+        .map(|s| db.texture_segment(s).unwrap())
         .collect();
     let (mut coded, mut decoded) = (0u64, 0u64);
     let t0 = std::time::Instant::now();

@@ -6,7 +6,7 @@ use portico_data::Database;
 use portico_data::build::{BuildOptions, Quiet, build};
 use portico_data::format::SegmentKind;
 use portico_data::import::import_file;
-use portico_data::texture::{TexelFormat, Wrap, decode_segment};
+use portico_data::texture::{PART_BYTES, TexelFormat, Wrap, decode_segment};
 use std::path::{Path, PathBuf};
 
 mod common;
@@ -134,7 +134,7 @@ fn a_built_database_holds_each_texture_coarse_first_as_whole_mip_chains() {
     for s in &t.segments {
         let entry = db.segments()[s.segment as usize];
         assert_eq!(SegmentKind::from_u16(entry.kind), Some(SegmentKind::Mips));
-        let bytes = db.segment(s.segment).unwrap();
+        let bytes = db.texture_segment(s).unwrap();
         let v = decode_segment(&bytes).unwrap();
         assert_eq!((v.width, v.levels), (s.width, s.levels));
         assert_eq!(v.texels.len() as u64, s.texel_bytes());
@@ -193,18 +193,51 @@ fn prefetch_brings_coarse_mips_with_the_geometry_that_needs_them() {
     let p = common::prefetcher_for(5, 1, true, &BuildOptions::default(), None);
     let h = p.database().header();
     assert_eq!(h.textures.len(), 4, "brick, wood, carpet, tiles");
+    // A segment or one of its parts: the texture, the level and the part.
     let texture_of_segment = |s: u32| {
         h.textures.iter().enumerate().find_map(|(t, r)| {
-            r.segments
-                .iter()
-                .position(|m| m.segment == s)
-                .map(|k| (t, k))
+            r.segments.iter().enumerate().find_map(|(k, m)| {
+                m.ids()
+                    .position(|id| id == s)
+                    .map(|part| (t, k, part as u32))
+            })
         })
     };
+    // The finer levels of the generator's 512² textures are longer than a part: cut, every
+    // piece at most a part long, and joined they decode to the level they were cut from.
+    let cut: Vec<_> = h
+        .textures
+        .iter()
+        .flat_map(|t| &t.segments)
+        .filter(|s| s.parts > 0)
+        .collect();
+    assert!(!cut.is_empty(), "no texture segment longer than a part");
+    for e in p.database().segments() {
+        if matches!(
+            SegmentKind::from_u16(e.kind),
+            Some(SegmentKind::Mips | SegmentKind::MipPart)
+        ) {
+            assert!(
+                e.length <= PART_BYTES as u64,
+                "segment {}: {} bytes",
+                e.id,
+                e.length
+            );
+        }
+    }
+    for s in &cut {
+        let whole = p.database().texture_segment(s).unwrap();
+        assert!(whole.len() > PART_BYTES);
+        let v = decode_segment(&whole).unwrap();
+        assert_eq!((v.width, v.height, v.levels), (s.width, s.height, s.levels));
+    }
+    let mut parts_seen = 0;
     let g = p.graph().unwrap();
+    // A screen large enough to want the finest levels, which are cut into parts.
     let policy = Policy {
         read_bytes: 1 << 30,
         range_cull: RangeCull::Any,
+        screen: [3840, 2160],
         ..Policy::default()
     };
     let mut mips_seen = 0;
@@ -218,8 +251,17 @@ fn prefetch_brings_coarse_mips_with_the_geometry_that_needs_them() {
                 continue;
             }
             mips_seen += 1;
-            let (t, k) = texture_of_segment(item.segment).expect("a texture's segment");
+            let (t, k, part) = texture_of_segment(item.segment).expect("a texture's segment");
             assert_eq!(item.lod as usize, k, "the item names its level");
+            // A part comes right after the piece before it.
+            if part > 0 {
+                parts_seen += 1;
+                assert_eq!(
+                    a.items[i - 1].segment,
+                    item.segment - 1,
+                    "part {part} out of order"
+                );
+            }
             // What the segment weighs on the wire: its coded size.
             assert_eq!(
                 item.bytes,
@@ -227,6 +269,13 @@ fn prefetch_brings_coarse_mips_with_the_geometry_that_needs_them() {
             );
             // The first segment of each texture listed is its coarse one.
             let first = *first_at.entry(t).or_insert((i, k));
+            // Held, a head's parts are held too: none of them is listed again.
+            if part == 0 && h.textures[t].segments[k].parts > 0 {
+                let group: std::collections::HashSet<u32> =
+                    h.textures[t].segments[k].ids().collect();
+                let again = p.answer(&obs, &policy, &group).unwrap();
+                assert!(again.items.iter().all(|i| !group.contains(&i.segment)));
+            }
             assert_eq!(
                 first.1, 0,
                 "texture {t}: segment {k} listed before the coarse one"
@@ -260,6 +309,7 @@ fn prefetch_brings_coarse_mips_with_the_geometry_that_needs_them() {
         }
     }
     assert!(mips_seen > 0, "no answer asked for a texture");
+    assert!(parts_seen > 0, "no answer asked for a part");
 }
 
 /// Hostile or careless names: a map that names a directory, an image outside the model's

@@ -8,13 +8,14 @@
 use crate::drive::{Ask, Event, Fetcher, Items};
 use crate::net::Remote;
 use crate::pages::PageBook;
+use portico_client::parts::{Joined, Parts};
 use portico_data::cells::StabList;
 use portico_data::geometry::Aabb;
 use portico_data::texture::Wrap;
 use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse, SegmentInfo};
 use portico_render::{GpuImpostor, GpuMesh, GpuTexture, Uploader};
 use std::collections::{HashMap, HashSet};
-use std::sync::{Arc, RwLock};
+use std::sync::{Arc, Mutex, RwLock};
 use tokio::sync::{mpsc, watch};
 
 /// A segment's contents, ready for the cache.
@@ -28,6 +29,11 @@ pub enum Payload {
     Impostor(GpuImpostor),
     /// A material texture's mip chain, on the GPU.
     Texture(GpuTexture),
+    /// The last part of a texture segment cut into parts: the whole segment's mip chain, on
+    /// the GPU, to be held under its head's id.
+    Joined(u32, GpuTexture),
+    /// A part of a texture segment (or its head) waiting for the rest.
+    Piece,
 }
 
 /// One message from the IO stage.
@@ -59,9 +65,13 @@ pub struct Catalogue {
     pub textures: HashMap<u32, (Aabb, u32)>,
     /// Material texture segments (mip chains) and how their texture wraps.
     pub mips: HashMap<u32, [Wrap; 2]>,
-    /// Geometry segments by the bytes they occupy decoded (more than their wire length when
-    /// compressed): what the IO window and the cache are charged.
+    /// Geometry and texture segments by the bytes they occupy decoded (geometry: more than its
+    /// wire length when compressed; textures: what the GPU holds, RGBA8 or BC): the IO window
+    /// charges the larger of this and the wire length.
     pub decoded: HashMap<u32, u64>,
+    /// Texture segments cut into parts, and the parts that came: shared by the IO thread,
+    /// which joins them, and the frame loop, which asks for and reports them.
+    pub parts: Arc<Mutex<Parts>>,
 }
 
 /// The real client's [`Fetcher`]: HTTP, checksum, decode, GPU upload.
@@ -227,6 +237,22 @@ impl Http {
                 .upload_impostor(bytes, bounds, *tile)
                 .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
             return Ok(Payload::Impostor(imp));
+        }
+        let parts = catalogue.parts.clone();
+        if parts.lock().unwrap_or_else(|e| e.into_inner()).is_piece(id) {
+            let joined = parts
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .join(id, bytes.to_vec());
+            let Joined::Complete(head, whole) = joined else {
+                return Ok(Payload::Piece);
+            };
+            let wrap = catalogue.mips.get(&head).copied().unwrap_or_default();
+            let t = self
+                .uploader
+                .upload_texture(&whole, wrap)
+                .map_err(|e| anyhow::anyhow!("segment {head} (joined from its parts): {e}"))?;
+            return Ok(Payload::Joined(head, t));
         }
         if let Some(wrap) = catalogue.mips.get(&id) {
             let t = self

@@ -227,3 +227,17 @@ pub(crate) fn texel_format(device: &wgpu::Device) -> TexelFormat {
         TexelFormat::Rgba8
     }
 }
+
+/// The features a device asks of `adapter`: BC texture compression where it offers it (desktop
+/// GPUs, llvmpipe, WebGPU on desktops, WebGL2 with the S3TC, S3TC sRGB, RGTC and BPTC
+/// extensions), unless `PORTICO_TEXELS=rgba8` says to hold
+/// textures as RGBA8 (to compare the two).
+pub(crate) fn block_features(adapter: &wgpu::Adapter) -> wgpu::Features {
+    let wanted = wgpu::Features::TEXTURE_COMPRESSION_BC;
+    let rgba8 = std::env::var("PORTICO_TEXELS").is_ok_and(|v| v.eq_ignore_ascii_case("rgba8"));
+    if rgba8 {
+        wgpu::Features::empty()
+    } else {
+        adapter.features() & wanted
+    }
+}

@@ -85,7 +85,7 @@ impl Renderer {
             .request_device(&wgpu::DeviceDescriptor {
                 label: Some("portico"),
                 required_limits: adapter.limits(),
-                required_features: block_features(adapter),
+                required_features: crate::material::block_features(adapter),
                 ..Default::default()
             })
             .await?;
@@ -645,18 +645,5 @@ fn msaa_from_env() -> Option<u32> {
             tracing::warn!("PORTICO_MSAA={other} ignored: samples per pixel are 1 or 4");
             None
         }
-    }
-}
-
-/// The features a device asks of `adapter`: BC texture compression where it offers it (desktop
-/// GPUs, llvmpipe, WebGPU and WebGL2 with S3TC), unless `PORTICO_TEXELS=rgba8` says to hold
-/// textures as RGBA8 (to compare the two).
-fn block_features(adapter: &wgpu::Adapter) -> wgpu::Features {
-    let wanted = wgpu::Features::TEXTURE_COMPRESSION_BC;
-    let rgba8 = std::env::var("PORTICO_TEXELS").is_ok_and(|v| v.eq_ignore_ascii_case("rgba8"));
-    if rgba8 {
-        wgpu::Features::empty()
-    } else {
-        adapter.features() & wanted
     }
 }

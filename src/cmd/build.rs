@@ -42,6 +42,10 @@ pub struct Args {
     /// bounds; normals and colours exact): fewer bytes on the wire, decoded by the client.
     #[arg(long)]
     compress: bool,
+    /// Most KiB of a texture segment on the wire (default 64: about 52 ms at 10 Mbit/s); a
+    /// longer one is cut into parts the client joins. Smaller for slower links (at least 1).
+    #[arg(long, value_name = "KB", value_parser = clap::value_parser!(u64).range(1..=1 << 20))]
+    part_kb: Option<u64>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -94,6 +98,7 @@ pub fn run(a: Args) -> Result<()> {
         name: a.name,
         no_cells: a.no_cells,
         no_hierarchy: a.no_hierarchy,
+        part_bytes: a.part_kb.map(|k| (k as usize) << 10),
     };
     let mut painter = painter(a.no_hierarchy || a.no_textures);
     let report = build_with(

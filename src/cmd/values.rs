@@ -91,8 +91,9 @@ const ELISION: [(&str, &str); 6] = [
 pub const POLICY_HELP: &str = "Prefetch policy, comma-separated key=value pairs (Funkhouser \
 §5.3): depth=FRAMES (lookahead, default 16), gran=object|cell, range=any|plane|frustum|direction, \
 look=any|plane|frustum, read=BYTES per answer (e.g. 4m, 512k), size=PIXELS per triangle (the \
-static size threshold), imp=0|1 (list impostor atlases), bc=0|1 (the client holds textures \
-block-compressed: BC1/BC3, at most a byte per texel). Unset keys keep their defaults";
+static size threshold), imp=0|1 (list impostor atlases), bc=0|1 (the load tester's clients hold textures \
+block-compressed: BC1/BC3, at most a byte per texel; a real client says what its GPU holds). \
+Unset keys keep their defaults";
 
 #[cfg(test)]
 mod tests {

@@ -29,7 +29,9 @@ pub fn build_tiny_with(dir: &Path, opts: &BuildOptions) -> PathBuf {
     db
 }
 
-/// The tiny building with the generator's textured materials (`dir/textured.portico`).
+/// The tiny building with the generator's textured materials (`dir/textured.portico`), its
+/// texture segments cut into parts of 4 KiB (so that every client joins parts, whatever level
+/// it asks for).
 pub fn build_tiny_textured(dir: &Path) -> PathBuf {
     let params = portico_generator::Params {
         preset: portico_generator::Preset::Tiny,
@@ -40,13 +42,11 @@ pub fn build_tiny_textured(dir: &Path) -> PathBuf {
     let glb = dir.join("textured.glb");
     std::fs::write(&glb, portico_generator::with_textures(&b.glb).unwrap()).unwrap();
     let db = dir.join("textured.portico");
-    build(
-        import_file(&glb).unwrap(),
-        &db,
-        &BuildOptions::default(),
-        &Quiet,
-    )
-    .unwrap();
+    let opts = BuildOptions {
+        part_bytes: Some(4 << 10),
+        ..Default::default()
+    };
+    build(import_file(&glb).unwrap(), &db, &opts, &Quiet).unwrap();
     db
 }
 

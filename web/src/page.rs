@@ -222,6 +222,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
 
     // What a texture costs the cache follows what the GPU holds it as (BC where offered).
     let texels = renderer.texel_format();
+    let parts = portico_client::parts::Parts::new(&header.textures);
     let catalogue = Catalogue {
         segments: manifest.segments,
         decoded: header.decoded_sizes(texels).collect(),
@@ -268,6 +269,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
             bounds,
             stabs,
             mips,
+            parts,
             tour,
         },
     };

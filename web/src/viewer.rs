@@ -12,6 +12,7 @@ use portico_client::demand::lacking;
 use portico_client::elision::Algorithm;
 use portico_client::frame::{Decider, Scene};
 use portico_client::navigate::Navigator;
+use portico_client::parts::{Joined, Parts};
 use portico_client::view::{self, Viewpoint};
 use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::Header;
@@ -46,6 +47,8 @@ pub struct Model {
     pub mips: std::collections::HashMap<u32, [portico_data::texture::Wrap; 2]>,
     /// The model's standard tour (or orbit and fly-through), where the view starts.
     pub tour: Option<CameraPath>,
+    /// Texture segments cut into parts, and the parts that came.
+    pub parts: Parts,
 }
 
 /// What the overlay shows and the tests read (`viewer.stats()` in JavaScript).
@@ -157,6 +160,12 @@ impl Viewer {
                 Arrival::Segment(id, bytes, _listed) => {
                     self.stats.segments_received += 1;
                     self.stats.bytes_received += bytes.len() as u64;
+                    // A part of a texture segment waits for the rest; the last one makes the
+                    // whole, held under its head's id.
+                    let (id, bytes) = match self.model.parts.join(id, bytes) {
+                        Joined::Whole(id, bytes) | Joined::Complete(id, bytes) => (id, bytes),
+                        Joined::Waiting => continue,
+                    };
                     let made = if self.model.stabs.contains(&id) {
                         portico_data::format::decode_segment::<StabList>(&bytes)
                             .map(|l| (Resident::Stab(Arc::new(l)), bytes.len() as u64))
@@ -194,7 +203,7 @@ impl Viewer {
                     };
                     match made {
                         Ok((value, charge)) => match self.cache.insert(id, value, charge) {
-                            Ok(released) => self.io.evicted(released),
+                            Ok(released) => self.io.evicted(self.model.parts.with_parts(released)),
                             Err(_) => {
                                 self.too_big.insert(id);
                             }
@@ -283,11 +292,11 @@ impl Viewer {
         let aspect = size.0 as f32 / size.1.max(1) as f32;
         let obs = view::observer(eye, dir, motion, FOVY, aspect, SPEED, TURN);
         self.draw(&obs, size, now_ms);
-        let held: Vec<u32> = self
-            .cache
-            .ids()
-            .chain(self.too_big.iter().copied())
-            .collect();
+        // A held texture segment with its parts, and the parts waiting for the rest.
+        let held = self
+            .model
+            .parts
+            .holding(self.cache.ids().chain(self.too_big.iter().copied()));
         let incomplete = self.stats.objects_skipped > 0;
         self.io.pump(
             obs,
@@ -326,7 +335,9 @@ impl Viewer {
         self.stats.objects_skipped = d.frame.objects_skipped;
         self.stats.lods_skipped = d.frame.lods_skipped;
         let (cache, too_big) = (&self.cache, &self.too_big);
-        self.lacking = lacking(&d, &scene, &|s| cache.contains(s) || too_big.contains(&s));
+        let lacked = lacking(&d, &scene, &|s| cache.contains(s) || too_big.contains(&s));
+        // A texture segment with parts: all of them but those that came.
+        self.lacking = self.model.parts.expand(lacked);
         if self.stats.first_complete_frame.is_none()
             && !d.visible.objects.is_empty()
             && d.frame.objects_skipped == 0

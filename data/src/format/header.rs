@@ -145,9 +145,10 @@ impl Header {
 
     /// What each segment costs a client's cache on a GPU that holds texels as `texels`, by
     /// id, from the segments' `wire` lengths: a texture segment its GPU bytes (the coded image
-    /// is dropped once decoded), a geometry segment the larger of its wire and decoded sizes,
+    /// is dropped once decoded; its parts nothing), a geometry segment the larger of its wire and decoded sizes,
     /// anything else its wire length. The server's lookahead and the load tester both count
-    /// with it, so that they agree with the clients.
+    /// with it, so that their geometry and textures agree with the clients' (impostor atlases
+    /// are counted at their wire length here, at their GPU bytes by the clients).
     pub fn cache_charges(&self, wire: &[u64], texels: crate::texture::TexelFormat) -> Vec<u64> {
         let mut charges = wire.to_vec();
         for (seg, plain) in self.decoded_sizes(texels) {
@@ -156,8 +157,11 @@ impl Header {
             }
         }
         for s in self.textures.iter().flat_map(|t| &t.segments) {
-            if let Some(c) = charges.get_mut(s.segment as usize) {
-                *c = s.gpu_bytes(texels);
+            // The head holds the texture once its parts have joined it; they hold nothing.
+            for (k, id) in s.ids().enumerate() {
+                if let Some(c) = charges.get_mut(id as usize) {
+                    *c = if k == 0 { s.gpu_bytes(texels) } else { 0 };
+                }
             }
         }
         charges
@@ -219,16 +223,33 @@ impl Header {
                         s.segment, s.width, s.height, s.levels
                     ));
                 }
-                let seg = segments.get(s.segment as usize).ok_or_else(|| {
-                    format!("texture {i} refers to missing segment {}", s.segment)
-                })?;
-                // Coded segments are at most their raw form (the build keeps the smaller).
+                // Coded segments are at most their raw form (the build keeps the smaller),
+                // head and parts together; the parts follow the head, each of their kind.
                 let most = crate::texture::TEXTURE_HEADER as u64 + s.texel_bytes();
-                if SegmentKind::from_u16(seg.kind) != Some(SegmentKind::Mips)
-                    || !(crate::texture::TEXTURE_HEADER as u64..=most).contains(&seg.raw_length)
-                {
+                if u64::from(s.parts) > most / crate::texture::MIN_PART_BYTES as u64 + 1 {
                     return Err(format!(
-                        "texture {i}'s segment {} has the wrong kind or size",
+                        "texture {i}'s segment {} claims {} parts",
+                        s.segment, s.parts
+                    ));
+                }
+                let mut total = 0u64;
+                for (k, id) in s.ids().enumerate() {
+                    let seg = segments
+                        .get(id as usize)
+                        .ok_or_else(|| format!("texture {i} refers to missing segment {id}"))?;
+                    let kind = if k == 0 {
+                        SegmentKind::Mips
+                    } else {
+                        SegmentKind::MipPart
+                    };
+                    if SegmentKind::from_u16(seg.kind) != Some(kind) {
+                        return Err(format!("texture {i}'s segment {id} has the wrong kind"));
+                    }
+                    total = total.saturating_add(seg.raw_length);
+                }
+                if !(crate::texture::TEXTURE_HEADER as u64..=most).contains(&total) {
+                    return Err(format!(
+                        "texture {i}'s segment {} has the wrong size",
                         s.segment
                     ));
                 }

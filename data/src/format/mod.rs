@@ -56,6 +56,9 @@ pub enum SegmentKind {
     /// A material's texture: one mip level and every coarser one, coded as a PNG or JPEG of the finest
     /// ([`crate::texture`]).
     Mips = 6,
+    /// A further part of a texture segment longer than [`crate::texture::PART_BYTES`]: its
+    /// bytes follow the segment before it ([`crate::texture::MipSegment::parts`]).
+    MipPart = 7,
 }
 
 impl SegmentKind {
@@ -68,6 +71,7 @@ impl SegmentKind {
             4 => SegmentKind::Texture,
             5 => SegmentKind::Occluders,
             6 => SegmentKind::Mips,
+            7 => SegmentKind::MipPart,
             _ => return None,
         })
     }

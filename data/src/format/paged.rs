@@ -44,7 +44,7 @@ impl Header {
     }
 
     /// The segments no instance owns (cell graph, occluders, impostor atlases, material texture
-    /// mips): the core manifest carries their rows. Stab lists are not among them: each comes
+    /// mips and their parts): the core manifest carries their rows. Stab lists are not among them: each comes
     /// with its cell's page.
     pub fn unowned_segments(&self) -> Vec<u32> {
         let mut ids: Vec<u32> = self
@@ -61,7 +61,7 @@ impl Header {
             .chain(
                 self.textures
                     .iter()
-                    .flat_map(|t| t.segments.iter().map(|s| s.segment)),
+                    .flat_map(|t| t.segments.iter().flat_map(|s| s.ids())),
             )
             .collect();
         ids.sort_unstable();

@@ -95,6 +95,19 @@ impl Database {
         &self.index
     }
 
+    /// A texture segment's whole bytes: its head's and its parts', joined in order (each
+    /// checksum-verified as [`Database::segment`] does).
+    ///
+    /// # Errors
+    /// As [`Database::segment`], for the head or any part.
+    pub fn texture_segment(&self, s: &crate::texture::MipSegment) -> Result<Vec<u8>> {
+        let mut out = Vec::new();
+        for id in s.ids() {
+            out.extend_from_slice(&self.segment(id)?);
+        }
+        Ok(out)
+    }
+
     /// A segment's bytes as a zero-copy slice of the map, checksum-verified on first access.
     pub fn segment(&self, id: u32) -> Result<Bytes> {
         let entry = self

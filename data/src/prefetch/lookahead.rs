@@ -272,13 +272,23 @@ impl Prefetcher {
             // The coarse mips with the coarsest LOD that has coordinates (the average-colour
             // box below it draws without); the useful ones with the finest, never mandatory
             // (level 1 at least). A texture shared by several objects is claimed once.
+            // A segment cut into parts lists them right after it, in order (the client joins
+            // them: `portico_client::parts`).
             let mut mips = |k: usize, level: u32| {
-                let Some(s) = t.segments.get(k).map(|m| m.segment) else {
+                let Some(m) = t.segments.get(k) else {
                     return 0;
                 };
-                let b = self.segment_bytes(s);
-                push(cands, need(s, NeedKind::Mips, k as u8, b, frames), level);
-                if claimed_mips.insert(s) { b } else { 0 }
+                for s in m.ids() {
+                    let part = self.segment_bytes(s);
+                    push(cands, need(s, NeedKind::Mips, k as u8, part, frames), level);
+                }
+                // Claimed at what the client's cache holds of it (its GPU's texel format).
+                let held = self.cache_charge(m.segment, policy.block_textures);
+                if claimed_mips.insert(m.segment) {
+                    held
+                } else {
+                    0
+                }
             };
             if Some(i) == coarsest_uv {
                 bytes += mips(0, level);

@@ -179,6 +179,14 @@ impl Prefetcher {
             .filter(|&s| s != u32::MAX)
     }
 
+    /// What segment `id` costs the client's cache ([`crate::format::Header::cache_charges`]).
+    fn cache_charge(&self, id: u32, block_textures: bool) -> u64 {
+        self.decoded[usize::from(block_textures)]
+            .get(id as usize)
+            .copied()
+            .unwrap_or(0)
+    }
+
     fn segment_bytes(&self, id: u32) -> u64 {
         self.db.segments().get(id as usize).map_or(0, |e| e.length)
     }

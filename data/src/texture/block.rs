@@ -18,11 +18,14 @@ use super::{TextureChain, level_size};
 /// How a client's GPU holds texture texels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum TexelFormat {
-    /// Four bytes per texel (every GPU; WebGL2 without the S3TC extension).
+    /// Four bytes per texel (every GPU; mobile GPUs, which take ETC2 / ASTC instead, and
+    /// WebGL2 without all of the S3TC, S3TC sRGB, RGTC and BPTC extensions wgpu asks for).
     #[default]
     Rgba8,
     /// BC1 for opaque textures, BC3 for those with alpha, where the size allows
-    /// ([`block_format`]): adapters with BC texture compression (desktop GPUs, llvmpipe).
+    /// ([`block_format`]: a finest level of whole 4 × 4 blocks): adapters with BC texture
+    /// compression (desktop GPUs, llvmpipe, WebGPU on desktops, WebGL2 with S3TC, RGTC and
+    /// BPTC).
     Block,
 }
 

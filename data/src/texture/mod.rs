@@ -18,6 +18,8 @@
 mod block;
 mod mips;
 mod segment;
+#[cfg(feature = "native")]
+mod store;
 
 pub use block::{
     BlockChain, BlockFormat, TexelFormat, block_chain_bytes, block_format, compress,
@@ -29,6 +31,8 @@ pub use segment::{
     Codec, CodedSegment, MIN_PSNR, TEXTURE_HEADER, TextureChain, code_segments, cut_segments,
     decode_segment, psnr,
 };
+#[cfg(feature = "native")]
+pub(crate) use store::write_textures;
 
 use serde::{Deserialize, Serialize};
 
@@ -38,6 +42,14 @@ pub const TEXTURE_MAGIC: u32 = u32::from_le_bytes(*b"PTEX");
 pub const COARSE_SIZE: u32 = 64;
 /// Largest texture side accepted (texels); larger images are scaled down on import.
 pub const MAX_SIZE: u32 = 4096;
+/// Most bytes a texture segment is stored and sent in: a longer one is cut into parts of at
+/// most this many bytes, each a segment of its own, so that no one of them holds a 10 Mbit/s
+/// link for more than about 52 ms (two frames at 40 Hz, one at the default 20 Hz) and what a
+/// frame lacks can be read between them. A client draws the texture segment once all its
+/// parts have come ([`MipSegment::parts`]).
+pub const PART_BYTES: usize = 64 << 10;
+/// The least a build may cut parts to ([`crate::build::BuildOptions::part_bytes`]).
+pub const MIN_PART_BYTES: usize = 1 << 10;
 
 /// How a material's texture repeats past 0..1 on one axis (glTF sampler wrap modes).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
@@ -91,6 +103,9 @@ pub struct MipSegment {
     pub levels: u32,
     /// Every texel's alpha is 255: a GPU with block compression holds it as BC1, else BC3.
     pub opaque: bool,
+    /// Further parts its bytes were cut into ([`PART_BYTES`]): segments `segment + 1` to
+    /// `segment + parts`, whose bytes follow `segment`'s in that order; 0 for most.
+    pub parts: u32,
 }
 
 impl MipSegment {
@@ -98,6 +113,12 @@ impl MipSegment {
     /// textures.
     pub fn texel_bytes(&self) -> u64 {
         chain_bytes(self.width, self.height, self.levels)
+    }
+
+    /// Its segment ids: `segment`, then its parts, in the order their bytes join.
+    pub fn ids(&self) -> impl Iterator<Item = u32> + use<> {
+        let first = self.segment;
+        (0..=self.parts).map(move |i| first.saturating_add(i))
     }
 
     /// Bytes its levels take on a GPU that holds texels as `texels` (RGBA8, or BC1 / BC3 where
@@ -198,6 +219,7 @@ mod tests {
             height: u32::MAX,
             levels: u32::MAX,
             opaque: true,
+            parts: 0,
         };
         assert!(!s.is_valid());
         assert!(s.texel_bytes() > 0);
@@ -208,6 +230,7 @@ mod tests {
             height: 16,
             levels: 7,
             opaque: false,
+            parts: 0,
         };
         assert!(ok.is_valid());
         assert!(!MipSegment { levels: 8, ..ok }.is_valid());
@@ -228,6 +251,7 @@ mod tests {
                     height: s,
                     levels: full_levels(s, s),
                     opaque: true,
+                    parts: 0,
                 })
                 .collect(),
             average: [0.5; 4],

@@ -158,7 +158,7 @@ impl Scene {
             };
             for s in &t.segments[skip..] {
                 let at = || format!("texture {i} ({}), segment {}", t.name, s.segment);
-                let bytes = db.segment(s.segment).with_context(at)?;
+                let bytes = db.texture_segment(s).with_context(at)?;
                 let gpu = renderer.upload_texture(&bytes, t.wrap).with_context(at)?;
                 self.gpu_bytes += gpu.gpu_bytes();
                 self.textures.insert(s.segment, gpu);

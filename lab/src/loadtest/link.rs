@@ -269,14 +269,11 @@ impl Fetcher for Linked {
     }
 
     fn decode(&self, id: u32, bytes: &[u8]) -> anyhow::Result<u64> {
-        let resident = if portico_data::codec::is_compressed(bytes) {
-            portico_data::codec::decode(bytes)
-                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?
-                .len()
-        } else {
-            bytes.len()
-        };
-        Ok(resident as u64)
+        if portico_data::codec::is_compressed(bytes) {
+            portico_data::codec::decode(bytes).map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
+        }
+        // What the real client's cache is charged for it (a texture: what its GPU holds).
+        Ok(self.world.decoded(id))
     }
 
     fn stream_url(&self) -> anyhow::Result<String> {
@@ -295,9 +292,10 @@ impl Fetcher for Linked {
         self.world.bytes(id)
     }
 
-    /// What the IO window is charged: the decoded size.
+    /// What the IO window is charged, as the real clients charge it: the larger of the wire
+    /// and decoded sizes.
     fn held_bytes(&self, id: u32) -> u64 {
-        self.world.decoded(id)
+        self.world.decoded(id).max(self.world.bytes(id))
     }
 }
 

@@ -25,6 +25,7 @@ use portico_client::cost::CostModel;
 use portico_client::demand::{ahead_of, lacking};
 use portico_client::elision::{Algorithm, Candidate, Choice};
 use portico_client::frame::{Decider, Decision, Resident};
+use portico_client::parts::{Joined, Parts};
 use portico_data::cells::StabList;
 use portico_native::drive::{Ask, Event};
 use portico_native::net::Remote;
@@ -225,6 +226,8 @@ struct Client {
     record: bool,
     /// What was drawn and what arrived in vain, for [`ClientResult::waste`].
     ledger: Ledger,
+    /// Texture segments cut into parts: those that came wait here for the rest.
+    parts: Parts,
 }
 
 impl Client {
@@ -252,6 +255,7 @@ impl Client {
             result: ClientResult::default(),
             record: s.record,
             ledger: Ledger::default(),
+            parts: Parts::new(&s.world.header.textures),
         }
     }
 
@@ -286,17 +290,27 @@ impl Client {
         }
     }
 
-    /// `bytes` came over the wire; the cache is charged `resident`, what they decode to.
+    /// `bytes` came over the wire; the cache is charged `resident`, what they decode to. A
+    /// part of a texture segment waits for the rest, as the real client's do; the last one
+    /// puts the whole under its head's id.
     fn arrive(&mut self, id: u32, bytes: u64, resident: u64, listed_at: Instant) {
         let r = &mut self.result;
         r.latencies.push(listed_at.elapsed().as_secs_f64());
         r.bytes_fetched += bytes;
         r.segments_fetched += 1;
-        if self.cache.contains(id) {
+        if self.cache.contains(self.parts.head(id)) {
             r.bytes_wasted += bytes; // fetched twice
             self.ledger.twice(bytes);
             return;
         }
+        let (id, bytes, resident) = match self.parts.join(id, Vec::new()) {
+            Joined::Whole(id, _) => (id, bytes, resident),
+            Joined::Waiting => return,
+            Joined::Complete(head, _) => {
+                let wire = self.parts.group(head).map(|s| self.world.bytes(s)).sum();
+                (head, wire, self.world.decoded(head))
+            }
+        };
         match self.cache.insert(id, (), resident) {
             Ok(released) => {
                 for gone in released {
@@ -379,7 +393,7 @@ impl Client {
         };
         Ask {
             observer: self.world.frames[p].observer,
-            held: self.cache.ids().collect(),
+            held: self.parts.holding(self.cache.ids()),
             consumed: self.consumed,
             wants,
             lacking,
@@ -391,7 +405,9 @@ impl Client {
     /// What this frame lacked, most urgent first ([`portico_client::demand::lacking`]).
     fn missing_now(&self, d: &Decision) -> Vec<u32> {
         let scene = self.world.scene();
-        lacking(d, &scene, &|s| self.cache.contains(s))
+        // A texture segment with parts: all of them but those that came.
+        self.parts
+            .expand(lacking(d, &scene, &|s| self.cache.contains(s)))
     }
 
     /// Demand fetch: exactly what this frame lacked.
@@ -427,10 +443,8 @@ impl Client {
             self.cache.touch(s);
         }
         let now = self.missing_now(d);
-        ahead_of(
-            &now,
-            window.into_iter().filter(|&s| !self.cache.contains(s)),
-        )
+        let ahead = window.into_iter().filter(|&s| !self.cache.contains(s));
+        ahead_of(&now, self.parts.expand(ahead))
     }
 
     /// Counts what was never drawn among the segments still resident.

@@ -59,7 +59,8 @@ pub struct World {
     pub database_id: String,
     /// Bytes of every segment on the wire, by id.
     pub seg_bytes: Vec<u64>,
-    /// Bytes of every segment once decoded (a compressed geometry segment's plain size), by id.
+    /// What every segment costs a client's cache, by id ([`Header::cache_charges`]: a
+    /// compressed geometry segment's plain size, a texture segment its GPU bytes).
     pub decoded_bytes: Vec<u64>,
     /// Decoded stab lists by cell.
     pub stabs: HashMap<u32, Arc<StabList>>,

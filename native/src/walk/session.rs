@@ -10,11 +10,13 @@ use crate::pages::PageBook;
 use anyhow::{Context, Result};
 use glam::Vec3;
 use portico_client::elision::Algorithm;
+use portico_client::parts::Parts;
 use portico_client::stats::FrameRow;
 use portico_client::view;
 use portico_data::texture::TexelFormat;
 use portico_protocol::{Observer, Policy};
 use portico_render::Renderer;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 /// A connected client drawing one frame per observer it is given: the walk's frame loop
@@ -281,6 +283,7 @@ fn model_of(
                 .flat_map(|t| t.segments.iter().map(move |s| (s.segment, t.wrap)))
                 .collect(),
             decoded: header.decoded_sizes(texels).collect(),
+            parts: Arc::new(Mutex::new(Parts::new(&header.textures))),
         },
         header,
         graph,

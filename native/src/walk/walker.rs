@@ -102,7 +102,9 @@ impl<'a> Walker<'a> {
                     self.bytes_read += bytes;
                     self.latencies.push(listed_at.elapsed().as_secs_f64());
                     // An atlas is charged what it holds on the GPU, not its PNG size; a
-                    // compressed mesh what it decoded to.
+                    // compressed mesh what it decoded to; a texture joined from its parts is
+                    // held under its head's id, the parts before it are not held at all.
+                    let mut key = id;
                     let (value, charge) = match body {
                         Payload::Mesh(m) => {
                             let gpu = m.gpu_bytes();
@@ -132,12 +134,18 @@ impl<'a> Walker<'a> {
                             let gpu = t.gpu_bytes();
                             (Resident::Texture(t), gpu)
                         }
+                        Payload::Joined(head, t) => {
+                            let gpu = t.gpu_bytes();
+                            key = head;
+                            (Resident::Texture(t), gpu)
+                        }
+                        Payload::Piece => continue,
                     };
-                    match self.cache.insert(id, value, charge) {
+                    match self.cache.insert(key, value, charge) {
                         Ok(released) => row.released_segments += released.len() as u32,
                         // Larger than the whole cache: never ask for it again.
                         Err(_) => {
-                            self.too_big.insert(id);
+                            self.too_big.insert(key);
                         }
                     }
                 }
@@ -204,7 +212,10 @@ impl<'a> Walker<'a> {
         row.lods_skipped = d.frame.lods_skipped;
         row.objects_skipped = d.frame.objects_skipped;
         let (cache, too_big) = (&self.cache, &self.too_big);
-        self.lacking = lacking(&d, &scene, &|s| cache.contains(s) || too_big.contains(&s));
+        let lacked = lacking(&d, &scene, &|s| cache.contains(s) || too_big.contains(&s));
+        // A texture segment with parts: all of them but those that came.
+        let lacking = self.parts().expand(lacked);
+        self.lacking = lacking;
         self.incomplete = d.frame.objects_skipped > 0;
 
         if let Some(h) = &self.model.header.hierarchy {
@@ -247,14 +258,21 @@ impl<'a> Walker<'a> {
         Ok(())
     }
 
+    fn parts(&self) -> std::sync::MutexGuard<'_, portico_client::parts::Parts> {
+        self.model
+            .catalogue
+            .parts
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+    }
+
     pub(super) fn publish(&self, io: &IoStage, observer: Observer) {
         let _ = io.state.send(Some(Ask {
             observer,
+            // A held texture segment with its parts, and the parts waiting for the rest.
             held: self
-                .cache
-                .ids()
-                .chain(self.too_big.iter().copied())
-                .collect(),
+                .parts()
+                .holding(self.cache.ids().chain(self.too_big.iter().copied())),
             consumed: self.consumed,
             wants: None,
             lacking: self.lacking.clone(),
