@@ -137,7 +137,7 @@ def ws_read(s):
 
 
 def hello(policy=None, rate=1 << 40, pages=False):
-    return json.dumps({"Hello": {"version": 4, "policy": policy or WIDE, "rate_bytes_per_s": rate,
+    return json.dumps({"Hello": {"version": 5, "policy": policy or WIDE, "rate_bytes_per_s": rate,
                                  "rtt_ms": 0}})
 
 
@@ -156,7 +156,7 @@ def get(host, port, path, headers=""):
 
 
 def prefetch_status(host, port):
-    body = json.dumps({"version": 4, "observer": OBS,
+    body = json.dumps({"version": 5, "observer": OBS,
                        "policy": {"depth_frames": 16, "frame_time_s": 0.05, "range_cull": "direction",
                                   "lookahead_cull": "any", "granularity": "object",
                                   "size_threshold_px": 1.0, "screen": [640, 480],
@@ -372,7 +372,7 @@ def slow_headers(host, port, seconds):
 
 
 def held(host, port, seconds):
-    body = json.dumps({"version": 4, "observer": OBS,
+    body = json.dumps({"version": 5, "observer": OBS,
                        "policy": dict(WIDE, depth_frames=16, range_cull="direction",
                                       granularity="object", read_bytes=4 << 20),
                        "held": [0] + [1] * 399_999}, separators=(",", ":")).encode()

@@ -34,6 +34,9 @@ pub enum Payload {
     Joined(u32, GpuTexture),
     /// A part of a texture segment (or its head) waiting for the rest.
     Piece,
+    /// A texture segment joined from its parts that does not decode (its head's id and why):
+    /// held as unusable, so that its parts are not fetched again and again.
+    Unusable(u32, String),
 }
 
 /// One message from the IO stage.
@@ -248,11 +251,10 @@ impl Http {
                 return Ok(Payload::Piece);
             };
             let wrap = catalogue.mips.get(&head).copied().unwrap_or_default();
-            let t = self
-                .uploader
-                .upload_texture(&whole, wrap)
-                .map_err(|e| anyhow::anyhow!("segment {head} (joined from its parts): {e}"))?;
-            return Ok(Payload::Joined(head, t));
+            return Ok(match self.uploader.upload_texture(&whole, wrap) {
+                Ok(t) => Payload::Joined(head, t),
+                Err(e) => Payload::Unusable(head, format!("segment {head} (joined): {e}")),
+            });
         }
         if let Some(wrap) = catalogue.mips.get(&id) {
             let t = self

@@ -15,7 +15,7 @@ pub use paged::*;
 use serde::{Serialize, de::DeserializeOwned};
 
 /// Version of the wire types in this crate.
-pub const PROTOCOL_VERSION: u32 = 4;
+pub const PROTOCOL_VERSION: u32 = 5;
 
 /// `Content-Type` of bincode bodies.
 pub const BINCODE_MIME: &str = "application/x-portico-bincode";

@@ -163,8 +163,19 @@ impl Viewer {
                     // A part of a texture segment waits for the rest; the last one makes the
                     // whole, held under its head's id.
                     let (id, bytes) = match self.model.parts.join(id, bytes) {
-                        Joined::Whole(id, bytes) | Joined::Complete(id, bytes) => (id, bytes),
-                        Joined::Waiting => continue,
+                        Joined::Whole(id, bytes) => (id, bytes),
+                        Joined::Complete(head, bytes) => {
+                            // Decoded and held (or found unusable) right below.
+                            self.model.parts.settle(head);
+                            (head, bytes)
+                        }
+                        Joined::Waiting => {
+                            let head = self.model.parts.head(id);
+                            if self.cache.contains(head) || self.too_big.contains(&head) {
+                                self.model.parts.forget(head);
+                            }
+                            continue;
+                        }
                     };
                     let made = if self.model.stabs.contains(&id) {
                         portico_data::format::decode_segment::<StabList>(&bytes)

@@ -212,6 +212,9 @@ impl Header {
                 ));
             }
         }
+        // Every texture segment and part belongs to one record only (a client joins parts by
+        // these ids).
+        let mut claimed = std::collections::HashSet::new();
         for (i, t) in self.textures.iter().enumerate() {
             if t.segments.is_empty() {
                 return Err(format!("texture {i} has no segments"));
@@ -232,8 +235,19 @@ impl Header {
                         s.segment, s.parts
                     ));
                 }
+                if s.segment.checked_add(s.parts).is_none() {
+                    return Err(format!(
+                        "texture {i}'s segment {} claims {} parts",
+                        s.segment, s.parts
+                    ));
+                }
                 let mut total = 0u64;
                 for (k, id) in s.ids().enumerate() {
+                    if !claimed.insert(id) {
+                        return Err(format!(
+                            "texture {i}'s segment {id} belongs to another texture segment too"
+                        ));
+                    }
                     let seg = segments
                         .get(id as usize)
                         .ok_or_else(|| format!("texture {i} refers to missing segment {id}"))?;

@@ -29,7 +29,7 @@ use bytemuck::{Pod, Zeroable};
 /// First eight bytes of every display database.
 pub const MAGIC: [u8; 8] = *b"PORTICO\0";
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 7;
+pub const FORMAT_VERSION: u32 = 8;
 /// Size of the prologue; the first segment starts here.
 pub const PROLOGUE_SIZE: usize = 128;
 /// Minimum alignment of every segment.

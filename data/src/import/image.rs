@@ -53,6 +53,12 @@ fn ktx2(bytes: &[u8]) -> Option<Result<(basisu::Transcoder<'_>, u32, u32), Strin
                         "{what}: a {w}x{h} image is beyond what is read ({MAX_DECODED_SIDE} a side)"
                     ));
                 }
+                if w as u64 * h as u64 * 4 > MAX_DECODED_BYTES {
+                    return Err(format!(
+                        "{what}: a {w}x{h} image decodes past {} MiB",
+                        MAX_DECODED_BYTES >> 20
+                    ));
+                }
                 Ok((t, w, h))
             }),
     )

@@ -298,15 +298,18 @@ impl Client {
         r.latencies.push(listed_at.elapsed().as_secs_f64());
         r.bytes_fetched += bytes;
         r.segments_fetched += 1;
-        if self.cache.contains(self.parts.head(id)) {
+        let head = self.parts.head(id);
+        if self.cache.contains(head) {
             r.bytes_wasted += bytes; // fetched twice
             self.ledger.twice(bytes);
+            self.parts.forget(head);
             return;
         }
         let (id, bytes, resident) = match self.parts.join(id, Vec::new()) {
             Joined::Whole(id, _) => (id, bytes, resident),
             Joined::Waiting => return,
             Joined::Complete(head, _) => {
+                self.parts.settle(head);
                 let wire = self.parts.group(head).map(|s| self.world.bytes(s)).sum();
                 (head, wire, self.world.decoded(head))
             }

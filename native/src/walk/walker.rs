@@ -139,7 +139,21 @@ impl<'a> Walker<'a> {
                             key = head;
                             (Resident::Texture(t), gpu)
                         }
-                        Payload::Piece => continue,
+                        Payload::Piece => {
+                            // A piece of a segment already held: nothing waits for it.
+                            let head = self.parts().head(id);
+                            if self.cache.contains(head) || self.too_big.contains(&head) {
+                                self.parts().forget(head);
+                            }
+                            continue;
+                        }
+                        Payload::Unusable(head, e) => {
+                            self.failures += 1;
+                            tracing::warn!("io: {e}");
+                            self.too_big.insert(head);
+                            self.parts().settle(head);
+                            continue;
+                        }
                     };
                     match self.cache.insert(key, value, charge) {
                         Ok(released) => row.released_segments += released.len() as u32,
@@ -147,6 +161,10 @@ impl<'a> Walker<'a> {
                         Err(_) => {
                             self.too_big.insert(key);
                         }
+                    }
+                    // Held (or too big) now: a joined segment's pieces need no more reporting.
+                    if key != id {
+                        self.parts().settle(key);
                     }
                 }
                 Event::Answer(resp) => resp.evict.iter().for_each(|&id| self.cache.demote(id)),
