@@ -203,6 +203,7 @@ fn basis_universal_ktx2_is_transcoded_like_any_other_image() {
         .unwrap()
         .to_rgba8();
     let p = portico_data::texture::psnr(want.as_raw(), small.as_raw());
+    eprintln!("kodim23.ktx2 (ETC1S) transcoded: 48x32 average {p:.1} dB against the photograph");
     assert!(p >= 40.0, "{p:.1} dB against the photograph");
 }
 

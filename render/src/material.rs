@@ -55,9 +55,22 @@ pub(crate) struct Materials {
     pub(crate) plain_culled: wgpu::RenderPipeline,
     /// The same under a mirroring transform (clockwise fronts).
     pub(crate) plain_culled_mirrored: wgpu::RenderPipeline,
+    /// How textures are held ([`texels_code`]): shared by the renderer and its uploaders.
+    texels: std::sync::atomic::AtomicU8,
 }
 
 impl Materials {
+    /// How textures are held now.
+    pub(crate) fn texels(&self) -> TexelFormat {
+        texels_of(self.texels.load(std::sync::atomic::Ordering::Relaxed))
+    }
+
+    /// Holds textures uploaded from now on as `t` (one the device offers: [`offers`]).
+    pub(crate) fn set_texels(&self, t: TexelFormat) {
+        self.texels
+            .store(texels_code(t), std::sync::atomic::Ordering::Relaxed);
+    }
+
     /// Creates the pipelines; `globals` is the walkthrough pipeline's group 0 layout.
     pub(crate) fn new(
         device: &wgpu::Device,
@@ -110,6 +123,7 @@ impl Materials {
             )
         };
         Materials {
+            texels: std::sync::atomic::AtomicU8::new(texels_code(default_texels(device))),
             textured: pipeline(
                 "textured",
                 &textured_layout,
@@ -161,13 +175,14 @@ impl Materials {
         }
         // Transcoded here too (van Waveren's real-time DXT: the wire keeps the smaller codec).
         let opaque = is_opaque(&view.texels);
-        let blocks = block_format(texel_format(device), view.width, view.height, opaque)
+        let blocks = block_format(self.texels(), view.width, view.height, opaque)
             .and_then(|f| compress(&view, f));
         let (format, texels) = match &blocks {
             Some(b) => (
                 match b.format {
                     BlockFormat::Bc1 => wgpu::TextureFormat::Bc1RgbaUnormSrgb,
                     BlockFormat::Bc3 => wgpu::TextureFormat::Bc3RgbaUnormSrgb,
+                    BlockFormat::Etc2Rgb => wgpu::TextureFormat::Etc2Rgb8UnormSrgb,
                 },
                 &b.bytes,
             ),
@@ -216,28 +231,57 @@ impl Materials {
     }
 }
 
-/// How `device` holds textures: block-compressed when it was given BC texture compression.
-pub(crate) fn texel_format(device: &wgpu::Device) -> TexelFormat {
-    if device
-        .features()
-        .contains(wgpu::Features::TEXTURE_COMPRESSION_BC)
-    {
-        TexelFormat::Block
-    } else {
-        TexelFormat::Rgba8
+/// The features a device asks of `adapter`: the texture compression it offers of BC (desktop
+/// GPUs, llvmpipe, WebGPU on desktops, WebGL2 with the S3TC, S3TC sRGB, RGTC and BPTC
+/// extensions) and ETC2 (mobile GPUs, OpenGL ES 3).
+pub(crate) fn block_features(adapter: &wgpu::Adapter) -> wgpu::Features {
+    adapter.features()
+        & (wgpu::Features::TEXTURE_COMPRESSION_BC | wgpu::Features::TEXTURE_COMPRESSION_ETC2)
+}
+
+/// Whether `device` can hold textures as `texels`.
+pub(crate) fn offers(device: &wgpu::Device, texels: TexelFormat) -> bool {
+    let f = device.features();
+    match texels {
+        TexelFormat::Rgba8 => true,
+        TexelFormat::Block => f.contains(wgpu::Features::TEXTURE_COMPRESSION_BC),
+        TexelFormat::Etc2 => f.contains(wgpu::Features::TEXTURE_COMPRESSION_ETC2),
     }
 }
 
-/// The features a device asks of `adapter`: BC texture compression where it offers it (desktop
-/// GPUs, llvmpipe, WebGPU on desktops, WebGL2 with the S3TC, S3TC sRGB, RGTC and BPTC
-/// extensions), unless `PORTICO_TEXELS=rgba8` says to hold
-/// textures as RGBA8 (to compare the two).
-pub(crate) fn block_features(adapter: &wgpu::Adapter) -> wgpu::Features {
-    let wanted = wgpu::Features::TEXTURE_COMPRESSION_BC;
-    let rgba8 = std::env::var("PORTICO_TEXELS").is_ok_and(|v| v.eq_ignore_ascii_case("rgba8"));
-    if rgba8 {
-        wgpu::Features::empty()
-    } else {
-        adapter.features() & wanted
+/// How a renderer on `device` holds textures unless told otherwise: BC where offered, else
+/// ETC2, else RGBA8; `PORTICO_TEXELS=rgba8|bc|etc2` picks one the device offers (to compare).
+pub(crate) fn default_texels(device: &wgpu::Device) -> TexelFormat {
+    let asked =
+        std::env::var("PORTICO_TEXELS")
+            .ok()
+            .and_then(|v| match v.to_ascii_lowercase().as_str() {
+                "rgba8" => Some(TexelFormat::Rgba8),
+                "bc" | "block" => Some(TexelFormat::Block),
+                "etc2" => Some(TexelFormat::Etc2),
+                _ => None,
+            });
+    asked
+        .into_iter()
+        .chain([TexelFormat::Block, TexelFormat::Etc2])
+        .find(|&t| offers(device, t))
+        .unwrap_or(TexelFormat::Rgba8)
+}
+
+/// A texel format as a byte (to share one between the renderer and its uploaders).
+pub(crate) fn texels_code(t: TexelFormat) -> u8 {
+    match t {
+        TexelFormat::Rgba8 => 0,
+        TexelFormat::Block => 1,
+        TexelFormat::Etc2 => 2,
+    }
+}
+
+/// [`texels_code`] back.
+pub(crate) fn texels_of(code: u8) -> TexelFormat {
+    match code {
+        1 => TexelFormat::Block,
+        2 => TexelFormat::Etc2,
+        _ => TexelFormat::Rgba8,
     }
 }

@@ -185,11 +185,22 @@ impl Renderer {
         self.held.bytes()
     }
 
-    /// How this renderer's GPU holds textures: block-compressed (BC1 / BC3) where the adapter
-    /// takes BC textures, else RGBA8 ([`portico_data::texture::TexelFormat`]). What a texture
-    /// segment costs a client's cache follows it.
+    /// How this renderer's GPU holds textures ([`portico_data::texture::TexelFormat`]): BC1 /
+    /// BC3 where the adapter takes BC textures, else ETC2 (opaque ones) where it takes those,
+    /// else RGBA8. What a texture segment costs a client's cache follows it.
     pub fn texel_format(&self) -> TexelFormat {
-        crate::material::texel_format(&self.device)
+        self.materials.texels()
+    }
+
+    /// Holds the textures uploaded from now on as `texels`, when the device offers it (BC,
+    /// ETC2, or RGBA8 always); returns whether it does. By default BC where offered, else
+    /// ETC2, else RGBA8 (`PORTICO_TEXELS=rgba8|bc|etc2` picks another the device offers).
+    pub fn set_texel_format(&mut self, texels: TexelFormat) -> bool {
+        let ok = crate::material::offers(&self.device, texels);
+        if ok {
+            self.materials.set_texels(texels);
+        }
+        ok
     }
 
     /// Samples per pixel (1, or 4 with MSAA).

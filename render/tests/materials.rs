@@ -219,18 +219,19 @@ fn cut_outs_drop_transparent_texels_and_blends_mix() {
     }
 }
 
-/// A texture a client holds: its GPU bytes are what its segment record says it costs the
-/// cache; on an adapter with BC textures (llvmpipe has them) at most a byte per texel of its
-/// finest level plus the coarser levels' third; and drawn, each quadrant of it shows its own
-/// colour (so the blocks are in the order and format the GPU reads), opaque (BC1) and with
-/// alpha (BC3) alike.
+/// A texture a client holds, in each texel format the adapter offers (llvmpipe offers BC and
+/// ETC2): its GPU bytes are what its segment record says it costs the cache, at most a byte per
+/// texel of its finest level plus the coarser levels' third when block-compressed; drawn, each
+/// quadrant shows its own colour and a photograph-like picture the RGBA8 one's (so the blocks
+/// are in the order and format the GPU reads), opaque (BC1, ETC2) and with alpha (BC3; RGBA8
+/// on an ETC2 GPU) alike.
 #[test]
-fn textures_are_held_block_compressed_where_the_adapter_takes_bc() {
+fn textures_are_held_block_compressed_where_the_adapter_takes_them() {
     use portico_data::texture::{MipSegment, TexelFormat, full_levels};
     let mut r = renderer();
-    eprintln!("{}: {:?}", r.adapter_info(), r.texel_format());
+    let llvmpipe = r.adapter_info().to_ascii_lowercase().contains("llvmpipe");
     let rgba8 = std::env::var("PORTICO_TEXELS").is_ok_and(|v| v.eq_ignore_ascii_case("rgba8"));
-    if r.adapter_info().to_ascii_lowercase().contains("llvmpipe") && !rgba8 {
+    if llvmpipe && !rgba8 {
         assert_eq!(r.texel_format(), TexelFormat::Block, "llvmpipe offers BC");
     }
     // Top left, top right, bottom left, bottom right.
@@ -244,57 +245,82 @@ fn textures_are_held_block_compressed_where_the_adapter_takes_bc() {
     let quad_mesh = r.upload(&encode_geometry(&quad([1.0; 4], 0.0))).unwrap();
     let cam = camera(Vec3::new(0.0, 0.0, 1.5));
     let vp = cam.view_proj(W as f32 / H as f32);
-    for alpha in [255u8, 200] {
-        let img = TextureImage {
-            name: "quadrants".into(),
-            width: w,
-            height: h,
-            rgba: (0..w * h)
-                .flat_map(|i| {
-                    let (x, y) = (i % w, i / w);
-                    let c = colours[((y / 32) * 2 + x / 32) as usize];
-                    [c[0], c[1], c[2], alpha]
-                })
-                .collect(),
-            wrap: [Wrap::Clamp; 2],
-        };
-        let gpu = upload(&r, &img);
-        let record = MipSegment {
-            segment: 0,
-            width: w,
-            height: h,
-            levels: full_levels(w, h),
-            opaque: alpha == 255,
-            parts: 0,
-        };
-        assert_eq!(gpu.gpu_bytes(), record.gpu_bytes(r.texel_format()));
-        if r.texel_format() == TexelFormat::Block {
-            let per_texel = if alpha == 255 { 0.5 } else { 1.0 };
-            let most = (w * h) as f64 * per_texel * 4.0 / 3.0 + 64.0;
-            assert!(gpu.gpu_bytes() as f64 <= most, "{} bytes", gpu.gpu_bytes());
-        } else {
-            assert_eq!(gpu.gpu_bytes(), record.texel_bytes());
-        }
+    let image = |alpha: u8, smooth: bool| TextureImage {
+        name: "quadrants".into(),
+        width: w,
+        height: h,
+        rgba: (0..w * h)
+            .flat_map(|i| {
+                let (x, y) = (i % w, i / w);
+                let c = if smooth {
+                    let (fx, fy) = (x as f32, y as f32);
+                    [
+                        (128.0 + 100.0 * (fx / 7.0).sin()) as u8,
+                        (128.0 + 90.0 * (fy / 5.0).cos()) as u8,
+                        (100.0 + 80.0 * ((fx + fy) / 11.0).sin()) as u8,
+                    ]
+                } else {
+                    colours[((y / 32) * 2 + x / 32) as usize]
+                };
+                [c[0], c[1], c[2], alpha]
+            })
+            .collect(),
+        wrap: [Wrap::Clamp; 2],
+    };
+    let draw_it = |r: &mut Renderer, img: &TextureImage| {
+        let gpu = upload(r, img);
         let mut draw = Draw::new(&quad_mesh, Mat4::IDENTITY, [1.0; 4]);
         draw.texture = Some(&gpu);
         r.render(&cam, &[draw]).unwrap();
-        let shot = r.read_pixels().unwrap();
-        // The quad's u runs along x, v down y: the texture's top left is the quad's.
-        for (q, at) in [(-0.5f32, 0.5f32), (0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)]
-            .iter()
-            .enumerate()
-        {
-            let c = vp * Vec4::new(at.0, at.1, 0.0, 1.0);
-            let (x, y) = (c.x / c.w, c.y / c.w);
-            let (px, py) = ((x + 1.0) * 0.5 * W as f32, (1.0 - y) * 0.5 * H as f32);
-            let got = shot.get_pixel(px as u32, py as u32).0;
-            for k in 0..3 {
-                assert!(
-                    got[k].abs_diff(colours[q][k]) <= 6,
-                    "alpha {alpha}, quadrant {q}: drew {got:?}, texture {:?}",
-                    colours[q]
-                );
+        (gpu.gpu_bytes(), r.read_pixels().unwrap())
+    };
+    r.set_texel_format(TexelFormat::Rgba8);
+    let (_, plain_smooth) = draw_it(&mut r, &image(255, true));
+    for texels in [TexelFormat::Rgba8, TexelFormat::Block, TexelFormat::Etc2] {
+        if !r.set_texel_format(texels) {
+            assert!(!llvmpipe, "llvmpipe offers {texels:?}");
+            continue;
+        }
+        for alpha in [255u8, 200] {
+            let (bytes, shot) = draw_it(&mut r, &image(alpha, false));
+            let record = MipSegment {
+                segment: 0,
+                width: w,
+                height: h,
+                levels: full_levels(w, h),
+                opaque: alpha == 255,
+                parts: 0,
+            };
+            assert_eq!(bytes, record.gpu_bytes(texels), "{texels:?}");
+            let per_texel = match (texels, alpha) {
+                (TexelFormat::Rgba8, _) | (TexelFormat::Etc2, 200) => 4.0,
+                (_, 255) => 0.5,
+                _ => 1.0,
+            };
+            let most = (w * h) as f64 * per_texel * 4.0 / 3.0 + 64.0;
+            assert!(bytes as f64 <= most, "{texels:?}: {bytes} bytes");
+            // The quad's u runs along x, v down y: the texture's top left is the quad's.
+            for (q, at) in [(-0.5f32, 0.5f32), (0.5, 0.5), (-0.5, -0.5), (0.5, -0.5)]
+                .iter()
+                .enumerate()
+            {
+                let c = vp * Vec4::new(at.0, at.1, 0.0, 1.0);
+                let (x, y) = (c.x / c.w, c.y / c.w);
+                let (px, py) = ((x + 1.0) * 0.5 * W as f32, (1.0 - y) * 0.5 * H as f32);
+                let got = shot.get_pixel(px as u32, py as u32).0;
+                for k in 0..3 {
+                    assert!(
+                        got[k].abs_diff(colours[q][k]) <= 6,
+                        "{texels:?}, alpha {alpha}, quadrant {q}: drew {got:?}, texture {:?}",
+                        colours[q]
+                    );
+                }
             }
         }
+        // A picture, not flat colours: within what the format loses of the RGBA8 frame.
+        let (_, smooth) = draw_it(&mut r, &image(255, true));
+        let p = portico_data::texture::psnr(plain_smooth.as_raw(), smooth.as_raw());
+        eprintln!("{texels:?}: the picture drawn at {p:.1} dB against RGBA8");
+        assert!(p >= 30.0, "{texels:?}: {p:.1} dB against RGBA8");
     }
 }

@@ -1,13 +1,15 @@
 //! Block compression on the client: a decoded mip chain re-coded as BC1 (opaque textures,
 //! half a byte per texel) or BC3 (with alpha, one byte per texel), the formats desktop GPUs
-//! sample directly, so a texture holds a quarter or an eighth of its RGBA8 bytes in GPU memory
-//! and in the cache budget.
+//! sample directly, or as ETC2 RGB8 (opaque, half a byte) for phones' GPUs, so a texture holds
+//! a quarter or an eighth of its RGBA8 bytes in GPU memory and in the cache budget.
 //!
 //! The wire stays a compact image codec ([`super::decode_segment`]: JPEG at 40 dB is a fifth
 //! of a byte per texel, less than any block format) and the client transcodes on its IO stage:
 //! the approach of J.M.P. van Waveren, *Real-Time DXT Compression* (Intel/id Software, 2006).
-//! The encoder is libsquish's range fit (the `texpresso` crate, pure Rust: the browser runs it
-//! too), chosen over cluster fit for speed: it runs once per arriving segment.
+//! The BC encoder is libsquish's range fit (the `texpresso` crate, pure Rust: the browser runs
+//! it too), chosen over cluster fit for speed: it runs once per arriving segment. The ETC2
+//! encoder is Basis Universal's real-time ETC1 packer (the `basisu` crate's, pure Rust): ETC1
+//! blocks are ETC2 RGB8 blocks.
 //!
 //! A GPU takes a block-compressed texture only when its finest level is a whole number of
 //! 4 × 4 blocks; other sizes stay RGBA8 ([`block_format`]). Levels below 4 texels are stored
@@ -27,6 +29,9 @@ pub enum TexelFormat {
     /// compression (desktop GPUs, llvmpipe, WebGPU on desktops, WebGL2 with S3TC, RGTC and
     /// BPTC).
     Block,
+    /// ETC2 (RGB8) for opaque textures where the size allows, RGBA8 for those with alpha:
+    /// mobile GPUs (OpenGL ES 3 and Vulkan on phones take ETC2, few take BC).
+    Etc2,
 }
 
 /// A block-compressed texel format.
@@ -36,21 +41,25 @@ pub enum BlockFormat {
     Bc1,
     /// 16 bytes per 4 × 4 block: colour and interpolated alpha.
     Bc3,
+    /// 8 bytes per 4 × 4 block: ETC2's RGB8 (ETC1 blocks, which every ETC2 GPU reads).
+    Etc2Rgb,
 }
 
 impl BlockFormat {
     /// Bytes of one 4 × 4 block.
     pub fn block_bytes(self) -> u64 {
         match self {
-            BlockFormat::Bc1 => 8,
+            BlockFormat::Bc1 | BlockFormat::Etc2Rgb => 8,
             BlockFormat::Bc3 => 16,
         }
     }
 
-    fn encoder(self) -> texpresso::Format {
+    /// The BC encoder of a BC format (`None` for ETC2).
+    fn encoder(self) -> Option<texpresso::Format> {
         match self {
-            BlockFormat::Bc1 => texpresso::Format::Bc1,
-            BlockFormat::Bc3 => texpresso::Format::Bc3,
+            BlockFormat::Bc1 => Some(texpresso::Format::Bc1),
+            BlockFormat::Bc3 => Some(texpresso::Format::Bc3),
+            BlockFormat::Etc2Rgb => None,
         }
     }
 }
@@ -67,6 +76,7 @@ pub fn block_format(
     match texels {
         TexelFormat::Block if whole && opaque => Some(BlockFormat::Bc1),
         TexelFormat::Block if whole => Some(BlockFormat::Bc3),
+        TexelFormat::Etc2 if whole && opaque => Some(BlockFormat::Etc2Rgb),
         _ => None,
     }
 }
@@ -108,25 +118,24 @@ pub fn compress(chain: &TextureChain, format: BlockFormat) -> Option<BlockChain>
     if !chain.width.is_multiple_of(4) || !chain.height.is_multiple_of(4) || chain.levels == 0 {
         return None;
     }
-    let encoder = format.encoder();
-    let params = texpresso::Params {
-        algorithm: texpresso::Algorithm::RangeFit,
-        weights: texpresso::COLOUR_WEIGHTS_UNIFORM,
-        weigh_colour_by_alpha: false,
-    };
     let total = block_chain_bytes(chain.width, chain.height, chain.levels, format) as usize;
     let mut bytes = vec![0u8; total];
     let mut at = 0;
     for i in 0..chain.levels {
         let (w, h, texels) = chain.level(i);
-        let size = encoder.compressed_size(w as usize, h as usize);
-        encoder.compress(
-            texels,
-            w as usize,
-            h as usize,
-            params,
-            &mut bytes[at..at + size],
-        );
+        let size = (w.div_ceil(4) * h.div_ceil(4)) as usize * format.block_bytes() as usize;
+        let out = &mut bytes[at..at + size];
+        match format.encoder() {
+            Some(encoder) => {
+                let params = texpresso::Params {
+                    algorithm: texpresso::Algorithm::RangeFit,
+                    weights: texpresso::COLOUR_WEIGHTS_UNIFORM,
+                    weigh_colour_by_alpha: false,
+                };
+                encoder.compress(texels, w as usize, h as usize, params, out);
+            }
+            None => etc2_level(texels, w, h, out),
+        }
         at += size;
     }
     Some(BlockChain {
@@ -138,16 +147,36 @@ pub fn compress(chain: &TextureChain, format: BlockFormat) -> Option<BlockChain>
     })
 }
 
-/// Decodes level 0 of a block chain back to RGBA8 (to measure what the GPU samples).
-pub fn decompress_finest(chain: &BlockChain) -> Vec<u8> {
+/// One level as ETC2 RGB8 blocks, row by row: Basis Universal's real-time ETC1 packer
+/// (`basisu::fastenc`), each block's texels row-major, a partial block's repeating its edge.
+fn etc2_level(texels: &[u8], w: u32, h: u32, out: &mut [u8]) {
+    let mut state = basisu::fastenc::etc1f::PackEtc1State::new();
+    let (bw, bh) = (w.div_ceil(4), h.div_ceil(4));
+    for by in 0..bh {
+        for bx in 0..bw {
+            let mut pixels = [[0u8; 4]; 16];
+            for (k, p) in pixels.iter_mut().enumerate() {
+                let x = (bx * 4 + k as u32 % 4).min(w - 1);
+                let y = (by * 4 + k as u32 / 4).min(h - 1);
+                let o = ((y * w + x) * 4) as usize;
+                p.copy_from_slice(&texels[o..o + 4]);
+            }
+            let b = ((by * bw + bx) * 8) as usize;
+            let block: &mut [u8; 8] = (&mut out[b..b + 8]).try_into().expect("8 bytes");
+            basisu::fastenc::etc1f::pack_etc1(block, &pixels, &mut state);
+        }
+    }
+}
+
+/// Decodes level 0 of a BC chain back to RGBA8 (to measure what the GPU samples); `None` for
+/// ETC2, which this build only encodes.
+pub fn decompress_finest(chain: &BlockChain) -> Option<Vec<u8>> {
+    let encoder = chain.format.encoder()?;
     let (w, h) = (chain.width as usize, chain.height as usize);
     let mut out = vec![0u8; w * h * 4];
-    let size = chain.format.encoder().compressed_size(w, h);
-    chain
-        .format
-        .encoder()
-        .decompress(&chain.bytes[..size], w, h, &mut out);
-    out
+    let size = encoder.compressed_size(w, h);
+    encoder.decompress(&chain.bytes[..size], w, h, &mut out);
+    Some(out)
 }
 
 #[cfg(test)]
@@ -188,6 +217,8 @@ mod tests {
         use TexelFormat::*;
         assert_eq!(block_format(Block, 256, 128, true), Some(Bc1));
         assert_eq!(block_format(Block, 256, 128, false), Some(Bc3));
+        assert_eq!(block_format(Etc2, 256, 128, true), Some(Etc2Rgb));
+        assert_eq!(block_format(Etc2, 256, 128, false), None);
         assert_eq!(block_format(Rgba8, 256, 128, true), None);
         assert_eq!(block_format(Block, 250, 128, true), None);
         // A 256² chain of 9 levels: 4096 + 1024 + ... blocks, the last three one block each.
@@ -218,7 +249,7 @@ mod tests {
             let finest = (w * h) as f64 * per_texel;
             let held = blocks.bytes.len() as f64;
             assert!(held >= finest && held <= finest * 1.4, "{held} bytes");
-            let back = decompress_finest(&blocks);
+            let back = decompress_finest(&blocks).unwrap();
             let p = psnr(&img, &back);
             assert!(p > 32.0, "{format:?}: {p:.1} dB");
             if alpha {
@@ -231,6 +262,15 @@ mod tests {
                 assert!(err <= 4, "alpha off by {err}");
             }
         }
+        // ETC2: half a byte per texel, every block written (none left zero on a picture).
+        let chain = chain_of(w, h, &picture(w, h, false));
+        let etc = compress(&chain, BlockFormat::Etc2Rgb).unwrap();
+        assert_eq!(
+            etc.bytes.len() as u64,
+            block_chain_bytes(w, h, chain.levels, BlockFormat::Etc2Rgb)
+        );
+        assert!(etc.bytes.chunks_exact(8).all(|b| b != [0; 8]));
+        assert!(decompress_finest(&etc).is_none());
         let odd = chain_of(6, 4, &picture(6, 4, false));
         assert!(compress(&odd, BlockFormat::Bc1).is_none());
     }
