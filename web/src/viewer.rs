@@ -111,8 +111,8 @@ pub struct Stats {
     pub transport: &'static str,
     /// Stream sessions opened so far.
     pub stream_sessions: u64,
-    /// How the GPU holds textures: `Block` (BC1 / BC3, where the adapter takes them) or
-    /// `Rgba8`.
+    /// How the GPU holds textures: `Block` (BC1 / BC3, where the adapter takes them), `Etc2`
+    /// (opaque ones, where it takes ETC2 and not BC) or `Rgba8`.
     pub texel_format: String,
     /// Texture segments decoded and uploaded so far.
     pub texture_segments: u64,
