@@ -145,8 +145,8 @@ impl Header {
 
     /// What each segment costs a client's cache on a GPU that holds texels as `texels`, by
     /// id, from the segments' `wire` lengths: a texture segment its GPU bytes (the coded image
-    /// is dropped once decoded; its parts nothing), a geometry segment the larger of its wire and decoded sizes,
-    /// anything else its wire length. The server's lookahead and the load tester both count
+    /// is dropped once decoded; its parts nothing), a geometry segment the larger of its wire
+    /// and decoded sizes, anything else its wire length. The server's lookahead and the load tester both count
     /// with it, so that their geometry and textures agree with the clients' (impostor atlases
     /// are counted at their wire length here, at their GPU bytes by the clients).
     pub fn cache_charges(&self, wire: &[u64], texels: crate::texture::TexelFormat) -> Vec<u64> {

@@ -20,8 +20,8 @@ use super::{TextureChain, level_size};
 /// How a client's GPU holds texture texels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum TexelFormat {
-    /// Four bytes per texel (every GPU; mobile GPUs, which take ETC2 / ASTC instead, and
-    /// WebGL2 without all of the S3TC, S3TC sRGB, RGTC and BPTC extensions wgpu asks for).
+    /// Four bytes per texel: every GPU can (those with neither BC nor ETC2, such as WebGL2
+    /// without all of the S3TC, S3TC sRGB, RGTC and BPTC extensions wgpu asks for).
     #[default]
     Rgba8,
     /// BC1 for opaque textures, BC3 for those with alpha, where the size allows
