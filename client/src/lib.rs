@@ -15,6 +15,7 @@
 //! - [`schedule`]: the read schedule of the IO stage (§5.2.3, Ch. 6); [`pacing`]: what it
 //!   keeps in flight on the measured link; [`deadline`]: which of the server's items to read
 //!   now and which a later answer can still bring in time.
+//! - [`engine`]: the IO stage without IO — state machines every front end drives (pull, …).
 //! - [`navigate`]: Funkhouser's mouse-and-keyboard navigation (§3.3.1).
 //! - [`policy`], [`stats`]: prefetch policy specs, per-frame statistics.
 
@@ -24,6 +25,7 @@ pub mod cost;
 pub mod deadline;
 pub mod demand;
 pub mod elision;
+pub mod engine;
 pub mod frame;
 pub mod navigate;
 pub mod pacing;

@@ -1,20 +1,17 @@
-//! The IO stage's driver: runs the read [`Schedule`] over HTTP (Funkhouser §5.2.3 and Ch. 6).
+//! The IO stage's pull driver: a tokio shell around the client engine's pull state machine
+//! ([`portico_client::engine::pull`], Funkhouser §5.2.3 and Ch. 6), which decides every request;
+//! this file only sends them and hands what comes back to the frame loop.
 //!
 //! [`drive`] is shared by the real client ([`crate::io`]) and the load tester's simulated
 //! clients (`portico_lab::loadtest`); what differs is the [`Fetcher`] (HTTP and a GPU upload,
 //! or HTTP through an emulated link) and where the need list comes from:
-//! - from the server: each published frame state becomes a `POST /v1/prefetch` (one at a time;
-//!   a newer state waits for the answer in flight), and the answer's items become the list,
-//!   behind what the latest frame lacked ([`Ask::lacking`], fetched as demand fetch would;
-//!   alone while the frame has objects with nothing to draw), the answer's items only when a
-//!   later answer could not bring them in time ([`ReadPlan`]);
+//! - from the server: each published frame state becomes a `POST /v1/prefetch` (one at a time),
+//!   behind what the latest frame lacked ([`Ask::lacking`]);
 //! - from the client itself ([`Ask::wants`]): demand fetch and the oracle of the load tester.
 
-use portico_client::deadline::{Link, ReadPlan};
-use portico_client::pacing::LinkMeter;
-use portico_client::schedule::Schedule;
-use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
-use std::collections::{HashMap, HashSet};
+use portico_client::engine::pull::{self, Command, Fault, FrameState, Pull};
+use portico_protocol::{Observer, Policy, PrefetchRequest, PrefetchResponse};
+use std::collections::HashMap;
 use std::future::Future;
 use std::time::Instant;
 use tokio::sync::{mpsc, watch};
@@ -37,7 +34,7 @@ pub struct Ask {
     /// may not have come yet (a cold start).
     pub lacking: Vec<u32>,
     /// The frame skipped objects (something in view had nothing to draw): read only what it
-    /// lacked until it is whole ([`portico_client::deadline::ReadPlan`]).
+    /// lacked until it is whole ([`portico_client::engine::pull`]).
     pub incomplete: bool,
     /// When the frame loop published this.
     pub at: Instant,
@@ -129,11 +126,11 @@ pub trait Fetcher: Clone + Send + Sync + 'static {
     }
 }
 
-/// Runs the IO stage until the frame loop goes away: keeps up to `parallel` segment fetches
-/// busy from the latest need list, with at most `window` bytes in flight or delivered and not
-/// yet taken ([`Schedule::with_window`]) and at most what the measured link delivers within
-/// two frames past its round trip on the wire ([`LinkMeter::cap`]), and sends what happens on
-/// `tx`.
+/// Runs the IO stage until the frame loop goes away: the pull engine
+/// ([`portico_client::engine::pull`]) keeps up to `parallel` segment fetches busy from the
+/// latest need list, with at most `window` bytes in flight or delivered and not yet taken and
+/// at most what the measured link delivers within two frames past its round trip on the wire;
+/// this shell sends what it asks for and hands what happens to the frame loop on `tx`.
 pub async fn drive<F: Fetcher>(
     fetcher: F,
     policy: Policy,
@@ -163,47 +160,31 @@ pub(crate) async fn drive_after<F: Fetcher>(
 ) -> Option<u64> {
     let mut stop = std::pin::pin!(stop);
     let mut stopped = false;
-    let mut s = Schedule::with_window(window);
-    // What arrives within two frames past the round trip stays in flight, no more: a new
-    // list's urgent segments never queue behind more read-ahead than that ([`LinkMeter`]).
-    let mut meter = LinkMeter::default();
-    let horizon_s = 2.0 * f64::from(policy.frame_time_s);
-    let mut seq = events;
+    let mut pull = Pull::new(policy, parallel, window).resume(events);
     let mut fetches: JoinSet<Fetched<F::Body>> = JoinSet::new();
-    // What each read request in flight asked for (a task that panics must not strand them),
-    // and when it was sent.
-    let mut batches: HashMap<tokio::task::Id, (Vec<u32>, Instant)> = HashMap::new();
+    // Each read request in flight's ticket (a task that panics must not strand its segments).
+    let mut tickets: HashMap<tokio::task::Id, u64> = HashMap::new();
     let mut asking: Option<JoinHandle<Answered>> = None;
-    // The server's latest need list and what the latest frame lacked: read the frame's first,
-    // then what of the answer cannot wait for the next one ([`ReadPlan`]).
-    let mut plan = ReadPlan::default();
-    let dt = f64::from(policy.frame_time_s);
-    // A frame state the server has not yet been asked about.
-    let mut unasked: Option<Ask> = None;
-    loop {
-        if asking.is_none()
-            && let Some(ask) = unasked.take()
-        {
-            asking = Some(ask_server(&fetcher, &mut s, policy, ask));
-        }
-        s.set_wire_cap(Some(meter.cap(horizon_s)));
-        while fetches.len() < parallel.max(1) {
-            let now = Instant::now();
-            let ids =
-                s.next_batch_sized(now, &|id| fetcher.bytes(id), &|id| fetcher.held_bytes(id));
-            if ids.is_empty() {
-                break;
+    'run: loop {
+        let wire = |id| fetcher.bytes(id);
+        let held = |id| fetcher.held_bytes(id);
+        while let Some(cmd) = pull.poll(Instant::now(), &wire, &held) {
+            match cmd {
+                Command::Ask(number, req) => {
+                    let f = fetcher.clone();
+                    asking = Some(tokio::spawn(async move {
+                        let at = Instant::now();
+                        (number, at, f.prefetch(req).await)
+                    }));
+                }
+                Command::Read(ticket, ids) => {
+                    let f = fetcher.clone();
+                    let task = fetches.spawn(async move { (ticket, f.batch(ids).await) });
+                    tickets.insert(task.id(), ticket);
+                }
             }
-            let f = fetcher.clone();
-            let asked = ids.clone();
-            let task = fetches.spawn(async move {
-                let got = f.batch(ids.clone()).await;
-                (ids, got)
-            });
-            meter.started(now);
-            batches.insert(task.id(), (asked, now));
         }
-        let event = tokio::select! {
+        let (events, mut bodies) = tokio::select! {
             () = &mut stop => {
                 stopped = true;
                 break;
@@ -213,66 +194,87 @@ pub(crate) async fn drive_after<F: Fetcher>(
                     break;
                 }
                 let Some(ask) = state.borrow_and_update().clone() else { continue };
-                s.acknowledge(ask.consumed, ask.wants.is_none());
                 match ask.wants {
-                    Some(ref wants) => s.refresh(wants.clone(), ask.at),
-                    None => {
-                        // Every frame: deadlines come nearer as the answer ages.
-                        plan.frame(ask.lacking.clone(), ask.incomplete);
-                        s.refresh(plan.list(Instant::now(), dt, link(&meter, &s)), ask.at);
-                        unasked = Some(ask);
-                    }
+                    Some(wants) => pull.want(wants, ask.consumed, ask.at),
+                    None => pull.frame(
+                        FrameState {
+                            observer: ask.observer,
+                            held: ask.held,
+                            lacking: ask.lacking,
+                            incomplete: ask.incomplete,
+                            consumed: ask.consumed,
+                        },
+                        Instant::now(),
+                    ),
                 }
                 continue;
             }
             answered = async { asking.as_mut().expect("guarded").await }, if asking.is_some() => {
                 asking = None;
-                match answered {
-                    Ok((ask, at, Ok(resp))) => {
-                        s.answered(ask);
-                        plan.answered(resp.items.clone(), at);
-                        s.refresh(plan.list(Instant::now(), dt, link(&meter, &s)), at);
-                        Event::Answer(Box::new(resp))
+                let now = Instant::now();
+                let event = match answered {
+                    Ok((number, at, got)) => pull.answered(number, at, got.map_err(fault), now),
+                    // The task panicked: the request failed.
+                    Err(e) => {
+                        let fault = Fault::Failed(format!("prefetch task: {e}"));
+                        pull.answered(0, now, Err(fault), now)
                     }
-                    Ok((_, _, Err(e))) if e.downcast_ref::<crate::net::Stale>().is_some() => {
-                        let _ = tx.send(Event::Stale(format!("{e:#}"))).await;
-                        break;
-                    }
-                    Ok((_, _, Err(e))) => Event::Failed(format!("{e:#}")),
-                    Err(e) => Event::Failed(format!("prefetch task: {e}")),
-                }
+                };
+                (vec![event], HashMap::new())
             }
             Some(done) = fetches.join_next_with_id(), if !fetches.is_empty() => {
                 let now = Instant::now();
-                let (ids, got, sent) = match done {
-                    Ok((task, (ids, got))) => {
-                        let sent = batches.remove(&task).map_or(now, |b| b.1);
-                        (ids, got, sent)
+                let (ticket, got) = match done {
+                    Ok((task, (ticket, got))) => {
+                        tickets.remove(&task);
+                        (ticket, got)
                     }
                     // The task panicked (a decoder or the GPU upload): its segments failed.
                     Err(e) => {
-                        let (ids, sent) = batches.remove(&e.id()).unwrap_or((Vec::new(), now));
-                        (ids, Err(anyhow::anyhow!("read task: {e}")), sent)
+                        let ticket = tickets.remove(&e.id()).unwrap_or_default();
+                        (ticket, Err(anyhow::anyhow!("read task: {e}")))
                     }
                 };
-                let wire: u64 = got
-                    .as_ref()
-                    .map_or(0, |items| items.iter().filter_map(|(_, i)| i.as_ref().ok()).map(|(_, b)| *b).sum());
-                meter.finished(sent, now, wire);
-                if let Err(e) = &got
-                    && e.downcast_ref::<crate::net::Stale>().is_some()
-                {
-                    let _ = tx.send(Event::Stale(format!("{e:#}"))).await;
-                    break;
-                }
-                if deliver(&mut s, ids, got, &mut seq, &tx).await.is_err() {
-                    break;
-                }
-                continue;
+                let mut bodies = HashMap::new();
+                let items = got.map_err(fault).map(|items| {
+                    items
+                        .into_iter()
+                        .map(|(id, item)| match item {
+                            Ok((body, bytes)) => {
+                                bodies.insert(id, body);
+                                (id, Ok(bytes))
+                            }
+                            Err(e) => (id, Err(format!("{e:#}"))),
+                        })
+                        .collect()
+                });
+                (pull.read(ticket, now, items), bodies)
             }
         };
-        seq += 1;
-        if tx.send(event).await.is_err() {
+        for event in events {
+            let event = match event {
+                pull::Event::Answer(resp) => Event::Answer(resp),
+                pull::Event::Segment {
+                    id,
+                    bytes,
+                    listed_at,
+                } => match bodies.remove(&id) {
+                    Some(body) => Event::Segment {
+                        id,
+                        body,
+                        bytes,
+                        listed_at,
+                    },
+                    None => Event::Failed(format!("segment {id}: came twice in one batch")),
+                },
+                pull::Event::Failed(why) => Event::Failed(why),
+                pull::Event::Stale(why) => Event::Stale(why),
+            };
+            if tx.send(event).await.is_err() {
+                break 'run;
+            }
+        }
+        if pull.stopped() {
             break;
         }
     }
@@ -280,102 +282,30 @@ pub(crate) async fn drive_after<F: Fetcher>(
     if let Some(a) = asking {
         a.abort();
     }
-    stopped.then_some(seq)
+    stopped.then_some(pull.events())
 }
 
-/// The link as `meter` measured it, with the wire bytes `s` has in flight.
-fn link(meter: &LinkMeter, s: &Schedule) -> Link {
-    Link {
-        rate: meter.rate(),
-        rtt_s: meter.rtt_s(),
-        in_flight: s.wire_bytes(),
+/// A failed request as the engine sees it: `410 Gone` ([`crate::net::Stale`]) stops pull.
+fn fault(e: anyhow::Error) -> Fault {
+    if e.downcast_ref::<crate::net::Stale>().is_some() {
+        Fault::Stale(format!("{e:#}"))
+    } else {
+        Fault::Failed(format!("{e:#}"))
     }
 }
 
 /// What one read request brings: each segment (id, then its body and size on the wire, or why
 /// not).
 pub type Items<B> = Vec<(u32, anyhow::Result<(B, u64)>)>;
-/// A finished read request: the ids asked for and what came of them.
-type Fetched<B> = (Vec<u32>, anyhow::Result<Items<B>>);
-
-/// Hands one finished read request's segments to the frame loop, one event each (one event
-/// for a request that failed as a whole). `Err` when the frame loop is gone.
-async fn deliver<B>(
-    s: &mut Schedule,
-    ids: Vec<u32>,
-    got: anyhow::Result<Items<B>>,
-    seq: &mut u64,
-    tx: &mpsc::Sender<Event<B>>,
-) -> Result<(), ()> {
-    let now = Instant::now();
-    let items = match got {
-        Ok(items) => items,
-        Err(e) => {
-            for id in ids {
-                s.finished(id, Err(()), now);
-            }
-            *seq += 1;
-            return tx
-                .send(Event::Failed(format!("{e:#}")))
-                .await
-                .map_err(|_| ());
-        }
-    };
-    let mut answered = HashSet::new();
-    for (id, item) in items {
-        answered.insert(id);
-        let event = match item {
-            Ok((body, bytes)) => {
-                let listed_at = s.finished(id, Ok(*seq + 1), now);
-                Event::Segment {
-                    id,
-                    body,
-                    bytes,
-                    listed_at,
-                }
-            }
-            Err(e) => {
-                s.finished(id, Err(()), now);
-                Event::Failed(format!("{e:#}"))
-            }
-        };
-        *seq += 1;
-        tx.send(event).await.map_err(|_| ())?;
-    }
-    for id in ids.into_iter().filter(|id| !answered.contains(id)) {
-        s.finished(id, Err(()), now);
-    }
-    Ok(())
-}
+/// A finished read request: its ticket and what came of it.
+type Fetched<B> = (u64, anyhow::Result<Items<B>>);
 /// A finished prefetch request: its number, when it was asked, and the answer.
 type Answered = (u64, Instant, anyhow::Result<PrefetchResponse>);
-
-/// Starts one `POST /v1/prefetch` for a frame state.
-fn ask_server<F: Fetcher>(
-    fetcher: &F,
-    s: &mut Schedule,
-    policy: Policy,
-    ask: Ask,
-) -> JoinHandle<Answered> {
-    let held: HashSet<u32> = ask.held.iter().copied().chain(s.pending()).collect();
-    let number = s.asked();
-    let req = PrefetchRequest {
-        version: PROTOCOL_VERSION,
-        observer: ask.observer,
-        policy,
-        held: portico_protocol::encode_held(held),
-    };
-    let f = fetcher.clone();
-    tokio::spawn(async move {
-        let at = Instant::now();
-        (number, at, f.prefetch(req).await)
-    })
-}
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use portico_protocol::{NeedItem, NeedKind};
+    use portico_protocol::{NeedItem, NeedKind, PROTOCOL_VERSION};
     use std::sync::{Arc, Mutex};
     use std::time::Duration;
 
@@ -505,43 +435,5 @@ mod tests {
         // The answer is 300 ms away: the frame's stab list and stand-ins are read meanwhile.
         let reads = reads_after(fake, ask(vec![7, 8, 9]), 5).await;
         assert_eq!(reads, vec![7, 8, 9, 100, 101]);
-    }
-
-    #[tokio::test]
-    async fn what_the_frame_lacks_goes_ahead_of_the_answer_and_is_not_read_twice() {
-        let fake = Fake {
-            answer: vec![100, 8, 101],
-            far: Vec::new(),
-            delay: Duration::ZERO,
-            reads: Arc::default(),
-        };
-        let reads = reads_after(fake, ask(vec![8]), 3).await;
-        assert_eq!(reads, vec![8, 100, 101]);
-    }
-
-    #[tokio::test]
-    async fn read_ahead_waits_while_the_view_has_objects_with_nothing_to_draw() {
-        let fake = Fake {
-            answer: vec![100, 101],
-            far: Vec::new(),
-            delay: Duration::ZERO,
-            reads: Arc::default(),
-        };
-        let state = Ask {
-            incomplete: true,
-            ..ask(vec![7])
-        };
-        assert_eq!(reads_after(fake, state, 1).await, vec![7]);
-    }
-
-    #[tokio::test]
-    async fn what_a_later_answer_can_bring_in_time_is_not_read_yet() {
-        let fake = Fake {
-            answer: vec![100],
-            far: vec![200, 201],
-            delay: Duration::ZERO,
-            reads: Arc::default(),
-        };
-        assert_eq!(reads_after(fake, ask(vec![7]), 2).await, vec![7, 100]);
     }
 }

@@ -14,12 +14,10 @@
 
 use crate::net::{Remote, Stale};
 use crate::stream::{Pushed, Stream};
-use portico_client::deadline::{Link, ReadPlan};
-use portico_client::pacing::LinkMeter;
-use portico_client::schedule::Schedule;
-use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
+use portico_client::engine::pull::{self, Command, Fault, FrameState, Pull};
+use portico_protocol::{Observer, Policy, PrefetchResponse};
 use std::cell::RefCell;
-use std::collections::{HashMap, HashSet, VecDeque};
+use std::collections::{HashMap, VecDeque};
 use std::rc::Rc;
 use std::time::Duration;
 use web_time::Instant;
@@ -30,9 +28,6 @@ pub const PARALLEL: usize = 8;
 pub const OPEN_WAIT: Duration = Duration::from_secs(2);
 /// How long after a stream failed another is tried.
 pub const RETRY: Duration = Duration::from_secs(5);
-/// How long pull waits after a failed prefetch request before it asks again (a server that is
-/// down is not asked sixty times a second).
-pub const BACKOFF: Duration = Duration::from_millis(500);
 /// Most pushed bytes taken into the cache in one frame: the rest waits for the next frames, so
 /// a burst of pushes never makes one long frame.
 pub const PUSHED_PER_FRAME: u64 = 4 << 20;
@@ -40,11 +35,7 @@ pub const PUSHED_PER_FRAME: u64 = 4 << 20;
 /// What a finished request left in the inbox.
 enum Done {
     Answer(u64, Instant, anyhow::Result<PrefetchResponse>),
-    Batch(
-        Vec<u32>,
-        Instant,
-        anyhow::Result<Vec<(u32, anyhow::Result<Vec<u8>>)>>,
-    ),
+    Batch(u64, anyhow::Result<Vec<(u32, anyhow::Result<Vec<u8>>)>>),
 }
 
 /// What the frame loop gets from the IO stage.
@@ -68,17 +59,14 @@ pub struct Catalogue {
     pub decoded: HashMap<u32, u64>,
 }
 
-/// The IO stage: the schedule, the requests in flight and their inbox.
+/// The IO stage: the pull engine, the stream session and the inbox of finished requests.
 pub struct Io {
     remote: Rc<Remote>,
     catalogue: Rc<Catalogue>,
     policy: Policy,
-    schedule: Schedule,
+    /// What pull sends and when ([`portico_client::engine::pull`]).
+    pull: Pull,
     inbox: Rc<RefCell<VecDeque<Done>>>,
-    asking: bool,
-    batches: usize,
-    /// Events handed to the frame loop so far (the schedule's sequence numbers).
-    seq: u64,
     stopped: bool,
     /// Whether to push (else pull only), the session, when it was opened, and when the next
     /// one may be.
@@ -87,15 +75,8 @@ pub struct Io {
     retry_at: Option<Instant>,
     /// Stream sessions opened so far.
     pub sessions: u64,
-    /// No prefetch request before this (after a failure).
-    ask_after: Option<Instant>,
     /// Whether the stream carried the segments at the last frame.
     was_pushing: bool,
-    /// The latest answer and what the latest frame lacked: the frame's first, then what of
-    /// the answer cannot wait for the next one (as `portico_native::drive`).
-    plan: ReadPlan,
-    /// The link as the reads measure it: what stays on the wire, and the deadlines.
-    meter: LinkMeter,
 }
 
 impl Io {
@@ -114,18 +95,12 @@ impl Io {
             stream: None,
             retry_at: None,
             sessions: 0,
-            ask_after: None,
             was_pushing: false,
-            plan: ReadPlan::default(),
-            meter: LinkMeter::default(),
             remote,
             catalogue: Rc::new(catalogue),
             policy,
-            schedule: Schedule::with_window(window),
+            pull: Pull::new(policy, PARALLEL, window),
             inbox: Rc::new(RefCell::new(VecDeque::new())),
-            asking: false,
-            batches: 0,
-            seq: 0,
             stopped: false,
         }
     }
@@ -138,73 +113,42 @@ impl Io {
         let done: Vec<Done> = self.inbox.borrow_mut().drain(..).collect();
         for d in done {
             match d {
-                Done::Answer(ask, at, answer) => {
-                    self.asking = false;
-                    match answer {
-                        Ok(resp) => {
-                            self.schedule.answered(ask);
-                            self.plan.answered(resp.items, at);
-                            self.refresh(now);
-                            out.push(Arrival::Release(resp.evict));
-                        }
-                        Err(e) => {
-                            self.ask_after = Some(now + BACKOFF);
-                            out.push(self.failure(e));
-                        }
-                    }
+                Done::Answer(number, at, answer) => {
+                    let event = self.pull.answered(number, at, answer.map_err(fault), now);
+                    out.extend(self.arrival(event, &mut HashMap::new()));
                 }
-                Done::Batch(ids, sent, got) => {
-                    self.batches -= 1;
-                    let wire: u64 = got.as_ref().map_or(0, |items| {
+                Done::Batch(ticket, got) => {
+                    // Checked against the manifest here; the engine hears what came.
+                    let mut bodies = HashMap::new();
+                    let items = got.map_err(fault).map(|items| {
                         items
-                            .iter()
-                            .filter_map(|(_, b)| b.as_ref().ok())
-                            .map(|b| b.len() as u64)
-                            .sum()
+                            .into_iter()
+                            .map(|(id, item)| {
+                                let checked = item.and_then(|b| {
+                                    let info = self.catalogue.segments.get(id as usize);
+                                    portico_protocol::verify_segment(info, id, &b)
+                                        .map(|()| b)
+                                        .map_err(anyhow::Error::msg)
+                                });
+                                match checked {
+                                    Ok(b) => {
+                                        let n = b.len() as u64;
+                                        bodies.insert(id, b);
+                                        (id, Ok(n))
+                                    }
+                                    Err(e) => (id, Err(format!("{e:#}"))),
+                                }
+                            })
+                            .collect()
                     });
-                    self.meter.finished(sent, now, wire);
-                    let items = match got {
-                        Ok(items) => items,
-                        Err(e) => {
-                            for &id in &ids {
-                                self.schedule.finished(id, Err(()), now);
-                            }
-                            out.push(self.failure(e));
-                            continue;
-                        }
-                    };
-                    let mut answered = HashSet::new();
-                    for (id, item) in items {
-                        answered.insert(id);
-                        let checked = item.and_then(|b| {
-                            portico_protocol::verify_segment(
-                                self.catalogue.segments.get(id as usize),
-                                id,
-                                &b,
-                            )
-                            .map(|()| b)
-                            .map_err(anyhow::Error::msg)
-                        });
-                        match checked {
-                            Ok(bytes) => {
-                                self.seq += 1;
-                                let listed = self.schedule.finished(id, Ok(self.seq), now);
-                                out.push(Arrival::Segment(id, bytes, listed));
-                            }
-                            Err(e) => {
-                                self.schedule.finished(id, Err(()), now);
-                                out.push(Arrival::Failed(format!("{e:#}")));
-                            }
-                        }
-                    }
-                    for id in ids.into_iter().filter(|id| !answered.contains(id)) {
-                        self.schedule.finished(id, Err(()), now);
+                    for event in self.pull.read(ticket, now, items) {
+                        out.extend(self.arrival(event, &mut bodies));
                     }
                 }
             }
         }
         // The frame loop takes every arrival at once.
-        self.schedule.acknowledge(self.seq, true);
+        self.pull.taken_all();
         self.take_pushed(&mut out);
         out
     }
@@ -302,32 +246,30 @@ impl Io {
         };
         if pushing && !self.was_pushing {
             // The stream takes over: what pull still meant to read is the stream's now.
-            self.schedule.refresh(Vec::new(), now);
-            self.plan.clear();
+            self.pull.clear(now);
         }
         self.was_pushing = pushing;
         pushing
     }
 
-    /// The read list from the plan at `now`.
-    fn refresh(&mut self, now: Instant) {
-        let link = Link {
-            rate: self.meter.rate(),
-            rtt_s: self.meter.rtt_s(),
-            in_flight: self.schedule.wire_bytes(),
-        };
-        let list = self
-            .plan
-            .list(now, f64::from(self.policy.frame_time_s), link);
-        self.schedule.refresh(list, now);
-    }
-
-    fn failure(&mut self, e: anyhow::Error) -> Arrival {
-        if e.downcast_ref::<Stale>().is_some() {
-            self.stopped = true;
-            return Arrival::Stale(format!("{e:#}"));
-        }
-        Arrival::Failed(format!("{e:#}"))
+    /// What the frame loop gets of one of the engine's events (a segment with its checked
+    /// bytes from `bodies`).
+    fn arrival(
+        &mut self,
+        event: pull::Event,
+        bodies: &mut HashMap<u32, Vec<u8>>,
+    ) -> Option<Arrival> {
+        Some(match event {
+            pull::Event::Answer(resp) => Arrival::Release(resp.evict),
+            pull::Event::Segment { id, listed_at, .. } => {
+                Arrival::Segment(id, bodies.remove(&id)?, listed_at)
+            }
+            pull::Event::Failed(why) => Arrival::Failed(why),
+            pull::Event::Stale(why) => {
+                self.stopped = true;
+                Arrival::Stale(why)
+            }
+        })
     }
 
     /// After a frame: asks the server about `observer` unless an answer is pending, and keeps
@@ -357,32 +299,16 @@ impl Io {
             return;
         }
         let held = listed.unwrap_or_else(|| held.take().into_iter().flatten().collect());
-        // Every frame: deadlines come nearer as the answer ages.
-        self.plan.frame(lacking, incomplete);
-        self.refresh(Instant::now());
-        let frame_s = f64::from(self.policy.frame_time_s);
-        self.schedule
-            .set_wire_cap(Some(self.meter.cap(2.0 * frame_s)));
-        if !self.asking && self.ask_after.is_none_or(|t| Instant::now() >= t) {
-            self.asking = true;
-            self.ask_after = None;
-            let held: HashSet<u32> = held.into_iter().chain(self.schedule.pending()).collect();
-            let number = self.schedule.asked();
-            let req = PrefetchRequest {
-                version: PROTOCOL_VERSION,
-                observer,
-                policy: self.policy,
-                held: portico_protocol::encode_held(held),
-            };
-            let (remote, inbox) = (self.remote.clone(), self.inbox.clone());
-            wasm_bindgen_futures::spawn_local(async move {
-                let at = Instant::now();
-                let answer = remote.prefetch(&req).await;
-                inbox
-                    .borrow_mut()
-                    .push_back(Done::Answer(number, at, answer));
-            });
-        }
+        let now = Instant::now();
+        let consumed = self.pull.events();
+        let state = FrameState {
+            observer,
+            held,
+            lacking,
+            incomplete,
+            consumed,
+        };
+        self.pull.frame(state, now);
         let catalogue = self.catalogue.clone();
         let wire = |id: u32| catalogue.segments.get(id as usize).map_or(0, |s| s.bytes);
         let held = |id: u32| {
@@ -391,19 +317,30 @@ impl Io {
                 .get(&id)
                 .map_or(wire(id), |&d| d.max(wire(id)))
         };
-        while self.batches < PARALLEL {
-            let ids = self.schedule.next_batch_sized(Instant::now(), &wire, &held);
-            if ids.is_empty() {
-                break;
-            }
-            self.batches += 1;
-            let sent = Instant::now();
-            self.meter.started(sent);
+        while let Some(cmd) = self.pull.poll(now, &wire, &held) {
             let (remote, inbox) = (self.remote.clone(), self.inbox.clone());
-            wasm_bindgen_futures::spawn_local(async move {
-                let got = remote.batch(&ids).await;
-                inbox.borrow_mut().push_back(Done::Batch(ids, sent, got));
-            });
+            match cmd {
+                Command::Ask(number, req) => wasm_bindgen_futures::spawn_local(async move {
+                    let at = Instant::now();
+                    let answer = remote.prefetch(&req).await;
+                    inbox
+                        .borrow_mut()
+                        .push_back(Done::Answer(number, at, answer));
+                }),
+                Command::Read(ticket, ids) => wasm_bindgen_futures::spawn_local(async move {
+                    let got = remote.batch(&ids).await;
+                    inbox.borrow_mut().push_back(Done::Batch(ticket, got));
+                }),
+            }
         }
+    }
+}
+
+/// A failed request as the engine sees it: `410 Gone` ([`Stale`]) stops pull.
+fn fault(e: anyhow::Error) -> Fault {
+    if e.downcast_ref::<Stale>().is_some() {
+        Fault::Stale(format!("{e:#}"))
+    } else {
+        Fault::Failed(format!("{e:#}"))
     }
 }

@@ -1,0 +1,9 @@
+//! The client engine without IO (in the style of `quinn-proto`): state machines that take
+//! events and the time as arguments and return what to send, with no sockets, threads or clock
+//! of their own. Every front end (the native client's IO thread, the browser page, the load
+//! tester's simulated clients) is a shell that does the IO these machines ask for, so they
+//! share every decision and are tested on a simulated clock in milliseconds.
+//!
+//! - [`pull`]: reads over `POST /v1/prefetch` and `GET /v1/batch` (Funkhouser §5.2.3, Ch. 6).
+
+pub mod pull;

@@ -1,0 +1,326 @@
+//! Pull, without IO: the IO stage's reads over `POST /v1/prefetch` and `GET /v1/batch`
+//! (Funkhouser §5.2.3 and Ch. 6) as a state machine that takes frames, answers, read results
+//! and the time, and says which request to send next ([`Pull::poll`]).
+//!
+//! - One prefetch request at a time: a newer frame waits for the answer in flight, then asks
+//!   with the latest observer. After a failed request, [`BACKOFF`] passes before the next (a
+//!   server that is down is not asked sixty times a second).
+//! - Up to `parallel` read requests from the top of the latest read list: what the latest frame
+//!   lacked, then what of the server's answer cannot wait for a later one
+//!   ([`crate::deadline::ReadPlan`]), or the client's own list ([`Pull::want`]: demand fetch,
+//!   the load tester's oracle).
+//! - No more bytes in flight or delivered and not taken than the window
+//!   ([`crate::schedule::Schedule::with_window`]), and no more on the wire than the measured
+//!   link delivers within two frames past its round trip ([`crate::pacing::LinkMeter::cap`]).
+//!
+//! Every [`Event`] it returns is numbered in order (from [`Pull::resume`]'s count, when push
+//! handed over): a front end hands them to its frame loop in that order, and the frame loop
+//! says how many it has taken ([`FrameState::consumed`]), which frees the window.
+
+use crate::deadline::{Link, ReadPlan};
+use crate::pacing::LinkMeter;
+use crate::schedule::Schedule;
+use portico_protocol::{Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, PrefetchResponse};
+use std::collections::{HashMap, HashSet};
+use std::time::Duration;
+use web_time::Instant;
+
+/// How long after a failed prefetch request the next may go.
+pub const BACKOFF: Duration = Duration::from_millis(500);
+
+/// What the frame loop publishes after each frame, for the server's lookahead.
+#[derive(Debug, Clone)]
+pub struct FrameState {
+    /// The observer.
+    pub observer: Observer,
+    /// Segments resident in the cache.
+    pub held: Vec<u32>,
+    /// What the frame lacked, most urgent first ([`crate::demand::lacking`]): read ahead of the
+    /// server's latest answer, which is a round trip old and may not have come yet.
+    pub lacking: Vec<u32>,
+    /// The frame skipped objects (something in view had nothing to draw): only what it lacked
+    /// is read until it is whole.
+    pub incomplete: bool,
+    /// How many events the frame loop has taken so far.
+    pub consumed: u64,
+}
+
+/// A request to send.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Command {
+    /// `POST /v1/prefetch` with this body; its answer goes to [`Pull::answered`] with the
+    /// number.
+    Ask(u64, PrefetchRequest),
+    /// `GET /v1/batch` of these segments; what comes goes to [`Pull::read`] with the ticket.
+    Read(u64, Vec<u32>),
+}
+
+/// Why a request failed.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Fault {
+    /// The server serves another database now (`410 Gone`): pull stops, rather than read
+    /// another file's segments by the old ids.
+    Stale(String),
+    /// Anything else (the walk goes on; a later list may ask again).
+    Failed(String),
+}
+
+/// What the front end hands its frame loop, in this order.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// A prefetch answer (its items are already scheduled; its eviction hints are for the
+    /// cache).
+    Answer(Box<PrefetchResponse>),
+    /// A segment of a read request came (the front end attaches what it made of it).
+    Segment {
+        /// Segment id.
+        id: u32,
+        /// Bytes on the wire.
+        bytes: u64,
+        /// When a need list first asked for it.
+        listed_at: Instant,
+    },
+    /// A request, or one segment of it, failed.
+    Failed(String),
+    /// The server serves another database now: pull has stopped.
+    Stale(String),
+}
+
+/// One segment of a finished read request: its bytes on the wire, or why it did not come
+/// (damaged, not decodable).
+pub type Item = (u32, Result<u64, String>);
+
+/// The pull state machine (see the module).
+#[derive(Debug)]
+pub struct Pull {
+    policy: Policy,
+    parallel: usize,
+    schedule: Schedule,
+    meter: LinkMeter,
+    plan: ReadPlan,
+    /// A prefetch request is in flight.
+    asking: bool,
+    /// No prefetch request before this (after a failure).
+    ask_after: Option<Instant>,
+    /// The latest frame the server has not been asked about: its observer and held set.
+    unasked: Option<(Observer, Vec<u32>)>,
+    /// Read requests in flight: what each asked for and when it was sent.
+    reads: HashMap<u64, (Vec<u32>, Instant)>,
+    tickets: u64,
+    /// Events returned so far.
+    events: u64,
+    stopped: bool,
+}
+
+impl Pull {
+    /// Pull under `policy` with up to `parallel` read requests in flight and at most `window`
+    /// bytes in flight or delivered and not yet taken.
+    pub fn new(policy: Policy, parallel: usize, window: u64) -> Pull {
+        Pull {
+            policy,
+            parallel: parallel.max(1),
+            schedule: Schedule::with_window(window),
+            meter: LinkMeter::default(),
+            plan: ReadPlan::default(),
+            asking: false,
+            ask_after: None,
+            unasked: None,
+            reads: HashMap::new(),
+            tickets: 0,
+            events: 0,
+            stopped: false,
+        }
+    }
+
+    /// Pull taking over after another transport handed `events` to the frame loop (they count
+    /// in what it reports it has taken).
+    pub fn resume(mut self, events: u64) -> Pull {
+        self.events = events;
+        self
+    }
+
+    /// Events returned so far (counting [`Pull::resume`]'s).
+    pub fn events(&self) -> u64 {
+        self.events
+    }
+
+    /// Whether pull has stopped (the database is stale).
+    pub fn stopped(&self) -> bool {
+        self.stopped
+    }
+
+    /// Requests in flight (prefetch and read).
+    pub fn in_flight(&self) -> usize {
+        self.reads.len() + usize::from(self.asking)
+    }
+
+    /// A frame at `now`: what the frame loop took frees the window, what it lacked goes to the
+    /// top of the read list, and the next prefetch request asks about its observer.
+    pub fn frame(&mut self, f: FrameState, now: Instant) {
+        self.schedule.acknowledge(f.consumed, true);
+        self.plan.frame(f.lacking, f.incomplete);
+        // Every frame: deadlines come nearer as the answer ages.
+        self.refresh(now, now);
+        self.unasked = Some((f.observer, f.held));
+    }
+
+    /// The client's own need list, most urgent first (demand fetch, the load tester's oracle),
+    /// instead of the server's: no prefetch request is sent.
+    pub fn want(&mut self, wants: Vec<u32>, consumed: u64, at: Instant) {
+        self.schedule.acknowledge(consumed, false);
+        self.schedule.refresh(wants, at);
+    }
+
+    /// The frame loop took every event returned so far (a front end that takes them all each
+    /// frame, as a page does).
+    pub fn taken_all(&mut self) {
+        self.schedule.acknowledge(self.events, true);
+    }
+
+    /// Forgets the read list (another transport carries the segments now); requests in flight
+    /// still finish.
+    pub fn clear(&mut self, now: Instant) {
+        self.plan.clear();
+        self.schedule.refresh(Vec::new(), now);
+    }
+
+    /// The next request to send at `now`, if any: call until `None` after every change. `wire`
+    /// gives a segment's bytes on the wire, `held` what it occupies once decoded (the window
+    /// counts the larger).
+    pub fn poll(
+        &mut self,
+        now: Instant,
+        wire: &impl Fn(u32) -> u64,
+        held: &impl Fn(u32) -> u64,
+    ) -> Option<Command> {
+        if self.stopped {
+            return None;
+        }
+        if !self.asking
+            && self.ask_after.is_none_or(|t| now >= t)
+            && let Some((observer, cached)) = self.unasked.take()
+        {
+            self.asking = true;
+            self.ask_after = None;
+            let held: HashSet<u32> = cached.into_iter().chain(self.schedule.pending()).collect();
+            let number = self.schedule.asked();
+            let req = PrefetchRequest {
+                version: PROTOCOL_VERSION,
+                observer,
+                policy: self.policy,
+                held: portico_protocol::encode_held(held),
+            };
+            return Some(Command::Ask(number, req));
+        }
+        if self.reads.len() >= self.parallel {
+            return None;
+        }
+        let horizon_s = 2.0 * f64::from(self.policy.frame_time_s);
+        self.schedule.set_wire_cap(Some(self.meter.cap(horizon_s)));
+        let ids = self.schedule.next_batch_sized(now, wire, held);
+        if ids.is_empty() {
+            return None;
+        }
+        self.tickets += 1;
+        self.meter.started(now);
+        self.reads.insert(self.tickets, (ids.clone(), now));
+        Some(Command::Read(self.tickets, ids))
+    }
+
+    /// The answer to prefetch request `number`, sent at `at`, came at `now` (or failed).
+    pub fn answered(
+        &mut self,
+        number: u64,
+        at: Instant,
+        answer: Result<PrefetchResponse, Fault>,
+        now: Instant,
+    ) -> Event {
+        self.asking = false;
+        let event = match answer {
+            Ok(resp) => {
+                self.schedule.answered(number);
+                self.plan.answered(resp.items.clone(), at);
+                self.refresh(now, at);
+                Event::Answer(Box::new(resp))
+            }
+            Err(fault) => {
+                self.ask_after = Some(now + BACKOFF);
+                self.fault(fault)
+            }
+        };
+        self.events += 1;
+        event
+    }
+
+    /// Read request `ticket` finished at `now`: each segment that came (in the order given),
+    /// or why the whole request failed. Returns one event per item (one for a request that
+    /// failed whole); a segment asked for and not among the items failed.
+    pub fn read(&mut self, ticket: u64, now: Instant, got: Result<Vec<Item>, Fault>) -> Vec<Event> {
+        let Some((ids, sent)) = self.reads.remove(&ticket) else {
+            return Vec::new();
+        };
+        let wire: u64 = got.as_ref().map_or(0, |items| {
+            items.iter().filter_map(|(_, r)| r.as_ref().ok()).sum()
+        });
+        self.meter.finished(sent, now, wire);
+        let items = match got {
+            Ok(items) => items,
+            Err(fault) => {
+                for id in ids {
+                    self.schedule.finished(id, Err(()), now);
+                }
+                self.events += 1;
+                return vec![self.fault(fault)];
+            }
+        };
+        let mut out = Vec::with_capacity(items.len());
+        let mut answered = HashSet::new();
+        for (id, item) in items {
+            if !answered.insert(id) {
+                continue;
+            }
+            self.events += 1;
+            out.push(match item {
+                Ok(bytes) => Event::Segment {
+                    id,
+                    bytes,
+                    listed_at: self.schedule.finished(id, Ok(self.events), now),
+                },
+                Err(e) => {
+                    self.schedule.finished(id, Err(()), now);
+                    Event::Failed(e)
+                }
+            });
+        }
+        for id in ids.into_iter().filter(|id| !answered.contains(id)) {
+            self.schedule.finished(id, Err(()), now);
+        }
+        out
+    }
+
+    fn fault(&mut self, fault: Fault) -> Event {
+        match fault {
+            Fault::Stale(why) => {
+                self.stopped = true;
+                Event::Stale(why)
+            }
+            Fault::Failed(why) => Event::Failed(why),
+        }
+    }
+
+    /// The read list from the plan at `now`, for need lists first listed at `at`.
+    fn refresh(&mut self, now: Instant, at: Instant) {
+        let link = Link {
+            rate: self.meter.rate(),
+            rtt_s: self.meter.rtt_s(),
+            in_flight: self.schedule.wire_bytes(),
+        };
+        let list = self
+            .plan
+            .list(now, f64::from(self.policy.frame_time_s), link);
+        self.schedule.refresh(list, at);
+    }
+}
+
+#[cfg(test)]
+mod tests;
