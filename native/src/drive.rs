@@ -40,6 +40,19 @@ pub struct Ask {
     pub at: Instant,
 }
 
+impl Ask {
+    /// The engine's view of this frame state.
+    pub fn frame_state(&self) -> FrameState {
+        FrameState {
+            observer: self.observer,
+            held: self.held.clone(),
+            lacking: self.lacking.clone(),
+            incomplete: self.incomplete,
+            consumed: self.consumed,
+        }
+    }
+}
+
 /// What the driver hands the frame loop.
 #[derive(Debug)]
 pub enum Event<B> {
@@ -196,16 +209,7 @@ pub(crate) async fn drive_after<F: Fetcher>(
                 let Some(ask) = state.borrow_and_update().clone() else { continue };
                 match ask.wants {
                     Some(wants) => pull.want(wants, ask.consumed, ask.at),
-                    None => pull.frame(
-                        FrameState {
-                            observer: ask.observer,
-                            held: ask.held,
-                            lacking: ask.lacking,
-                            incomplete: ask.incomplete,
-                            consumed: ask.consumed,
-                        },
-                        Instant::now(),
-                    ),
+                    None => pull.frame(ask.frame_state(), Instant::now()),
                 }
                 continue;
             }

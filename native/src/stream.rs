@@ -21,12 +21,9 @@
 
 use crate::drive::{Ask, Event, Fetcher, drive_after};
 use futures_util::{SinkExt, StreamExt};
-use portico_protocol::CLOSE_STALE;
-use portico_protocol::{
-    MAX_LACKING, PROTOCOL_VERSION, Policy, ServerFrame, StreamClient, StreamServer,
-    parse_server_frame,
-};
-use std::collections::HashSet;
+use portico_client::engine::pull::Fault;
+use portico_client::engine::push::{Push, Pushed};
+use portico_protocol::{Policy, StreamClient};
 use std::fmt;
 use std::str::FromStr;
 use std::sync::{Arc, Mutex};
@@ -264,15 +261,6 @@ enum Incoming {
     Failed(String),
 }
 
-/// Events handed to the frame loop, in order, and which segment each was: what the frame
-/// loop has taken ([`Ask::consumed`]) tells which segments it has seen.
-#[derive(Default)]
-struct Handed {
-    events: u64,
-    /// (event number, segment) of segments not yet known taken.
-    segments: Vec<(u64, u32)>,
-}
-
 /// One push session on `ws`, after `events` handed on before it; returns why it ended and how
 /// many events were handed on in all.
 async fn push<F: Fetcher>(
@@ -301,13 +289,25 @@ async fn push<F: Fetcher>(
         }
         let _ = sink.close().await;
     });
-    // In: each frame is the client's when the link has brought it; decoded, then handed on.
-    let handed = Arc::new(Mutex::new(Handed {
+    // The session's state (what to send each frame, what was handed on): the engine's.
+    let held: Vec<u32> = state
+        .borrow()
+        .as_ref()
+        .map(|a| a.held.clone())
+        .unwrap_or_default();
+    let (session, opening) = Push::open(
+        &shown,
+        policy,
+        rate,
+        Duration::ZERO,
+        f.paged(),
+        held,
         events,
-        segments: Vec::new(),
-    }));
+    );
+    let session = Arc::new(Mutex::new(session));
+    // In: each frame is the client's when the link has brought it; decoded, then handed on.
     let (inbox, mut in_rx) = mpsc::unbounded_channel::<(Instant, Incoming)>();
-    let (fd, txd, h, outd) = (f.clone(), tx.clone(), handed.clone(), out.clone());
+    let (fd, txd, h, outd) = (f.clone(), tx.clone(), session.clone(), out.clone());
     let mut delivery = tokio::spawn(async move {
         while let Some((at, got)) = in_rx.recv().await {
             tokio::time::sleep_until(at.into()).await;
@@ -330,16 +330,16 @@ async fn push<F: Fetcher>(
                     // no pushed stab list does): given back, the server pushes it again later.
                     Err(e) if e.is::<crate::io::Unready>() => {
                         tracing::debug!("stream: {e:#}");
-                        let back = portico_protocol::to_bincode(&StreamClient::Evicted(vec![id]))
-                            .unwrap_or_default();
+                        let back =
+                            portico_protocol::to_bincode(&Push::rejected(id)).unwrap_or_default();
                         let _ = outd.send((fd.reaches_server(), Message::Binary(back.into())));
                         continue;
                     }
                     // Rejected (a checksum, a damaged frame): the server's mirror must not
                     // count it held, or it would never come again.
                     Err(e) => {
-                        let back = portico_protocol::to_bincode(&StreamClient::Evicted(vec![id]))
-                            .unwrap_or_default();
+                        let back =
+                            portico_protocol::to_bincode(&Push::rejected(id)).unwrap_or_default();
                         let _ = outd.send((fd.reaches_server(), Message::Binary(back.into())));
                         (Event::Failed(format!("segment {id}: {e:#}")), None)
                     }
@@ -353,45 +353,18 @@ async fn push<F: Fetcher>(
             if txd.send(event).await.is_err() {
                 return;
             }
-            let mut h = h.lock().unwrap_or_else(|e| e.into_inner());
-            let n = h.events;
-            h.events += 1;
-            h.segments.extend(segment.map(|s| (n, s)));
+            lock(&h).handed(segment);
         }
     });
     let send = |m: &StreamClient| {
         let bytes = portico_protocol::to_bincode(m).unwrap_or_default();
         let _ = out.send((f.reaches_server(), Message::Binary(bytes.into())));
     };
-    let hello = |rtt: Duration| StreamClient::Hello {
-        version: PROTOCOL_VERSION,
-        policy,
-        rate_bytes_per_s: rate,
-        rtt_ms: rtt.as_millis().min(10_000) as u32,
-    };
-    // Hello at once (the first observer must not wait for a round trip), and again with the
-    // round trip once the ping's pong says what it is.
-    send(&hello(Duration::ZERO));
-    if f.paged() {
-        send(&StreamClient::Pages);
+    for m in &opening {
+        send(m);
     }
     let pinged = Instant::now();
     let _ = out.send((f.reaches_server(), Message::Ping(Vec::new().into())));
-
-    // What the frame loop held at its last state: what it no longer holds was evicted. A
-    // reopened session starts from what the cache holds, and tells the server.
-    let mut held: HashSet<u32> = state
-        .borrow()
-        .as_ref()
-        .map(|a| a.held.iter().copied().collect())
-        .unwrap_or_default();
-    if !held.is_empty() {
-        send(&StreamClient::Holding(portico_protocol::encode_held(
-            held.iter().copied(),
-        )));
-    }
-    let mut lacking: Vec<u32> = Vec::new();
-    let mut last_observer = Instant::now();
     let ended = loop {
         tokio::select! {
             changed = state.changed() => {
@@ -399,65 +372,39 @@ async fn push<F: Fetcher>(
                     break Ended::Gone;
                 }
                 let Some(ask) = state.borrow_and_update().clone() else { continue };
-                let now_held: HashSet<u32> = ask.held.iter().copied().collect();
-                let taken: Vec<u32> = {
-                    let mut h = handed.lock().unwrap_or_else(|e| e.into_inner());
-                    let (seen, rest) = h.segments.iter().partition(|(n, _)| *n < ask.consumed);
-                    h.segments = rest;
-                    seen.into_iter().map(|(_, s): (u64, u32)| s).collect()
-                };
-                let evicted: HashSet<u32> = held
-                    .iter()
-                    .chain(&taken)
-                    .filter(|s| !now_held.contains(s))
-                    .copied()
-                    .collect();
-                held = now_held;
-                if !evicted.is_empty() {
-                    send(&StreamClient::Evicted(evicted.into_iter().collect()));
+                for m in lock(&session).frame(&ask.frame_state(), Instant::now()) {
+                    send(&m);
                 }
-                // What the frame lacked goes ahead of the server's list, as pull reads it
-                // ahead of the answer (sent when it changes).
-                let mut now_lacking = ask.lacking.clone();
-                now_lacking.truncate(MAX_LACKING);
-                if now_lacking != lacking {
-                    send(&StreamClient::Lacking(now_lacking.clone()));
-                    lacking = now_lacking;
-                }
-                send(&StreamClient::Observer(ask.observer));
-                last_observer = Instant::now();
             }
             msg = socket.next() => {
                 let frame = match msg {
                     Some(Ok(Message::Binary(b))) => b,
                     Some(Ok(Message::Pong(_))) => {
                         let rtt = f.reaches_client(0).saturating_duration_since(pinged);
-                        send(&hello(rtt));
+                        send(&lock(&session).measured(rtt));
                         continue;
                     }
                     Some(Ok(Message::Close(c))) => {
-                        let stale = c.as_ref().is_some_and(|c| u16::from(c.code) == CLOSE_STALE);
-                        let why = c.map(|c| format!(" ({}: {})", c.code, c.reason)).unwrap_or_default();
-                        let why = format!("{shown}: the server ended the session{why}");
-                        break if stale { Ended::Stale(why) } else { Ended::Failed(why) };
+                        let close = c.as_ref().map(|c| (u16::from(c.code), c.reason.as_str()));
+                        break match lock(&session).closed(close) {
+                            Fault::Stale(why) => Ended::Stale(why),
+                            Fault::Failed(why) => Ended::Failed(why),
+                        };
                     }
                     Some(Ok(_)) => continue,
                     Some(Err(e)) => break Ended::Failed(format!("{shown}: the session broke: {e}")),
                     None => break Ended::Failed(format!("{shown}: the session ended")),
                 };
                 let at = f.reaches_client(frame.len() as u64);
-                let got = match parse_server_frame(&frame) {
-                    Ok(ServerFrame::Segment(id, bytes)) => Incoming::Segment {
+                let got = match lock(&session).incoming(&frame, at) {
+                    Pushed::Segment { id, bytes, listed_at } => Incoming::Segment {
                         id,
                         bytes: bytes.to_vec(),
-                        listed_at: last_observer,
+                        listed_at,
                     },
-                    Ok(ServerFrame::Page(bytes)) => Incoming::Page(bytes.to_vec()),
-                    Ok(ServerFrame::Control(StreamServer::Dropped(_))) => continue,
-                    Ok(ServerFrame::Control(StreamServer::Error(e))) => {
-                        Incoming::Failed(format!("{shown}: {}: {}", e.code, e.message))
-                    }
-                    Err(e) => Incoming::Failed(format!("{shown}: a frame does not decode: {e}")),
+                    Pushed::Page(bytes) => Incoming::Page(bytes.to_vec()),
+                    Pushed::Failed(why) => Incoming::Failed(why),
+                    Pushed::Nothing => continue,
                 };
                 if inbox.send((at, got)).is_err() {
                     break Ended::Gone;
@@ -473,8 +420,13 @@ async fn push<F: Fetcher>(
     if !delivery.is_finished() {
         let _ = (&mut delivery).await;
     }
-    let events = handed.lock().unwrap_or_else(|e| e.into_inner()).events;
+    let events = lock(&session).events();
     (ended, events)
+}
+
+/// The session's state, whoever panicked holding it.
+fn lock(s: &Mutex<Push>) -> std::sync::MutexGuard<'_, Push> {
+    s.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 #[cfg(test)]

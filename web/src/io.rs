@@ -2,19 +2,22 @@
 //! What it brings waits in an inbox until the next frame takes it, so a frame never waits for
 //! the network. Two transports:
 //!
-//! - **push** (the default): one `/v1/stream` session ([`crate::stream`]); the observer goes
-//!   every frame, the server pushes in need order what the cache lacks;
-//! - **pull** (the fallback, and `?transport=pull`): the native client's read [`Schedule`] over
-//!   HTTP — one prefetch request in flight at a time (a newer observer waits for its answer)
-//!   and up to [`PARALLEL`] segment batches from the top of the latest list: what the last
-//!   frame lacked, then the latest answer's items.
+//! - **push** (the default): one `/v1/stream` session ([`crate::stream`]) run by the client
+//!   engine's push session ([`portico_client::engine::push`]): the observer and what the frame
+//!   lacked go every frame, the server pushes in need order what the cache lacks;
+//! - **pull** (the fallback, and `?transport=pull`): the engine's pull state machine
+//!   ([`portico_client::engine::pull`], as the native client) over HTTP — one prefetch request
+//!   in flight at a time and up to [`portico_client::defaults::PARALLEL`] segment batches from the top of the latest
+//!   list: what the last frame lacked, then what of the answer cannot wait.
 //!
 //! A stream that does not open within [`OPEN_WAIT`], or closes (a server restart), hands over
 //! to pull at once and is tried again after [`RETRY`].
 
 use crate::net::{Remote, Stale};
-use crate::stream::{Pushed, Stream};
+use crate::stream::Stream;
+use portico_client::defaults;
 use portico_client::engine::pull::{self, Command, Fault, FrameState, Pull};
+use portico_client::engine::push::{self, Push, Pushed};
 use portico_protocol::{Observer, Policy, PrefetchResponse};
 use std::cell::RefCell;
 use std::collections::{HashMap, VecDeque};
@@ -22,8 +25,6 @@ use std::rc::Rc;
 use std::time::Duration;
 use web_time::Instant;
 
-/// Segment batches in flight at once (as the native client).
-pub const PARALLEL: usize = 8;
 /// How long a stream may take to open before pull takes over.
 pub const OPEN_WAIT: Duration = Duration::from_secs(2);
 /// How long after a stream failed another is tried.
@@ -31,6 +32,14 @@ pub const RETRY: Duration = Duration::from_secs(5);
 /// Most pushed bytes taken into the cache in one frame: the rest waits for the next frames, so
 /// a burst of pushes never makes one long frame.
 pub const PUSHED_PER_FRAME: u64 = 4 << 20;
+
+/// A stream session: its socket, when it was opened, and the engine's session state once the
+/// socket is open.
+struct Session {
+    socket: Stream,
+    since: Instant,
+    push: Option<Push>,
+}
 
 /// What a finished request left in the inbox.
 enum Done {
@@ -71,7 +80,7 @@ pub struct Io {
     /// Whether to push (else pull only), the session, when it was opened, and when the next
     /// one may be.
     push: bool,
-    stream: Option<(Stream, Instant)>,
+    stream: Option<Session>,
     retry_at: Option<Instant>,
     /// Stream sessions opened so far.
     pub sessions: u64,
@@ -99,7 +108,7 @@ impl Io {
             remote,
             catalogue: Rc::new(catalogue),
             policy,
-            pull: Pull::new(policy, PARALLEL, window),
+            pull: Pull::new(policy, defaults::PARALLEL, window),
             inbox: Rc::new(RefCell::new(VecDeque::new())),
             stopped: false,
         }
@@ -153,42 +162,62 @@ impl Io {
         out
     }
 
-    /// What the stream pushed, checked like pulled segments; a closed stream hands over to
-    /// pull.
+    /// What the stream pushed, checked like pulled segments (a rejected one is given back to
+    /// the server); a closed stream hands over to pull.
     fn take_pushed(&mut self, out: &mut Vec<Arrival>) {
-        let Some((stream, _)) = &self.stream else {
+        let Some(Session { socket, push, .. }) = &mut self.stream else {
             return;
         };
         let now = Instant::now();
-        for p in stream.take(PUSHED_PER_FRAME) {
-            match p {
-                Pushed::Segment(id, bytes) => {
-                    let info = self.catalogue.segments.get(id as usize);
-                    match portico_protocol::verify_segment(info, id, &bytes) {
-                        Ok(()) => out.push(Arrival::Segment(id, bytes, now)),
-                        Err(e) => out.push(Arrival::Failed(e)),
+        if let Some(push) = push {
+            for frame in socket.take(PUSHED_PER_FRAME) {
+                let (arrival, segment) = match push.incoming(&frame, now) {
+                    Pushed::Segment {
+                        id,
+                        bytes,
+                        listed_at,
+                    } => {
+                        let info = self.catalogue.segments.get(id as usize);
+                        match portico_protocol::verify_segment(info, id, bytes) {
+                            Ok(()) => (Arrival::Segment(id, bytes.to_vec(), listed_at), Some(id)),
+                            Err(e) => {
+                                socket.send(&Push::rejected(id));
+                                (Arrival::Failed(e), None)
+                            }
+                        }
                     }
-                }
-                Pushed::Error(e) => out.push(Arrival::Failed(e)),
+                    // This client reads the whole manifest and never asks for pages.
+                    Pushed::Page(_) => {
+                        let why = format!("{}: a page came unasked for", socket.url());
+                        (Arrival::Failed(why), None)
+                    }
+                    Pushed::Failed(why) => (Arrival::Failed(why), None),
+                    Pushed::Nothing => continue,
+                };
+                out.push(arrival);
+                push.handed(segment);
             }
         }
-        if let Some(why) = stream.closed() {
-            if stream.stale() {
-                out.push(Arrival::Stale(why));
-                self.stream = None;
-                self.stopped = true;
-                return;
+        if let Some((code, reason)) = socket.closed() {
+            let close = (code != 0).then_some((code, reason.as_str()));
+            match push::ended(socket.url(), close) {
+                Fault::Stale(why) => {
+                    out.push(Arrival::Stale(why));
+                    self.stopped = true;
+                }
+                Fault::Failed(why) => {
+                    out.push(Arrival::Failed(format!("{why}; pulling over HTTP")));
+                    self.retry_at = Some(now + RETRY);
+                }
             }
-            out.push(Arrival::Failed(format!("{why}; pulling over HTTP")));
             self.stream = None;
-            self.retry_at = Some(now + RETRY);
         }
     }
 
     /// Which transport brings segments now: `stream` or `pull`.
     pub fn transport(&self) -> &'static str {
         match &self.stream {
-            Some((s, _)) if s.is_open() => "stream",
+            Some(s) if s.socket.is_open() => "stream",
             _ => "pull",
         }
     }
@@ -198,44 +227,57 @@ impl Io {
         self.catalogue.decoded.get(&id).copied()
     }
 
-    /// Segments the cache released (the stream's server forgets it sent them).
-    pub fn evicted(&self, ids: Vec<u32>) {
-        if let Some((s, _)) = &self.stream {
-            s.evicted(ids);
-        }
-    }
-
     /// Keeps a stream session going when pushing; `true` while it carries the segments (or
-    /// may still open), so pull stays idle.
-    /// `held`: what the cache holds, asked for only when a session opens (it tells the server).
-    fn pushing(&mut self, observer: Observer, held: impl FnOnce() -> Vec<u32>) -> bool {
+    /// may still open), so pull stays idle. An open session hears the frame (what the cache
+    /// released since the last, what the frame lacked, the observer).
+    fn pushing(&mut self, state: &FrameState, now: Instant) -> bool {
         if !self.push {
             return false;
         }
-        let now = Instant::now();
         if self.stream.is_none() && self.retry_at.is_none_or(|t| now >= t) {
             let db = self.remote.database();
-            let base = self.remote.base();
-            match Stream::open(
-                base,
-                db.as_deref(),
-                self.remote.token(),
-                self.policy,
-                &held(),
-            ) {
-                Ok(s) => {
-                    self.stream = Some((s, now));
+            match Stream::open(self.remote.base(), db.as_deref(), self.remote.token()) {
+                Ok(socket) => {
+                    self.stream = Some(Session {
+                        socket,
+                        since: now,
+                        push: None,
+                    });
                     self.sessions += 1;
                 }
                 Err(_) => self.retry_at = Some(now + RETRY),
             }
         }
-        let pushing = match &self.stream {
-            Some((s, _)) if s.is_open() => {
-                s.observe(observer);
+        let pushing = match &mut self.stream {
+            Some(Session { socket, push, .. }) if socket.is_open() => {
+                let push = push.get_or_insert_with(|| {
+                    // Opened: Hello, then what the cache holds (a session opened again).
+                    let held = state.held.iter().copied();
+                    let (p, opening) = Push::open(
+                        socket.url(),
+                        self.policy,
+                        u64::MAX / 2,
+                        socket.rtt(),
+                        false,
+                        held,
+                        0,
+                    );
+                    for m in &opening {
+                        socket.send(m);
+                    }
+                    p
+                });
+                // The frame loop took everything handed on.
+                let f = FrameState {
+                    consumed: push.events(),
+                    ..state.clone()
+                };
+                for m in push.frame(&f, now) {
+                    socket.send(&m);
+                }
                 true
             }
-            Some((_, since)) if now.duration_since(*since) < OPEN_WAIT => true,
+            Some(s) if s.push.is_none() && now.duration_since(s.since) < OPEN_WAIT => true,
             // Not open in time: pull, and try another session later.
             Some(_) => {
                 self.stream = None;
@@ -273,10 +315,10 @@ impl Io {
     }
 
     /// After a frame: asks the server about `observer` unless an answer is pending, and keeps
-    /// up to [`PARALLEL`] batches in flight from the top of the latest read list, no more on
+    /// up to [`portico_client::defaults::PARALLEL`] batches in flight from the top of the latest read list, no more on
     /// the wire than the measured link delivers within two frames past its round trip. `held`:
     /// the segments resident in the cache; `lacking`: what the frame lacked, read first, and
-    /// alone while the frame was `incomplete` ([`ReadPlan`]).
+    /// alone while the frame was `incomplete` ([`portico_client::deadline::ReadPlan`]).
     pub fn pump(
         &mut self,
         observer: Observer,
@@ -287,27 +329,18 @@ impl Io {
         if self.stopped {
             return;
         }
-        // Listed once at most: for a session that opens, or for the prefetch request.
-        let mut held = Some(held);
-        let mut listed: Option<Vec<u32>> = None;
-        let pushing = self.pushing(observer, || {
-            let v: Vec<u32> = held.take().into_iter().flatten().collect();
-            listed = Some(v.clone());
-            v
-        });
-        if pushing {
-            return;
-        }
-        let held = listed.unwrap_or_else(|| held.take().into_iter().flatten().collect());
         let now = Instant::now();
-        let consumed = self.pull.events();
-        let state = FrameState {
+        let mut state = FrameState {
             observer,
-            held,
+            held: held.collect(),
             lacking,
             incomplete,
-            consumed,
+            consumed: 0,
         };
+        if self.pushing(&state, now) {
+            return;
+        }
+        state.consumed = self.pull.events();
         self.pull.frame(state, now);
         let catalogue = self.catalogue.clone();
         let wire = |id: u32| catalogue.segments.get(id as usize).map_or(0, |s| s.bytes);

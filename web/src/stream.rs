@@ -1,15 +1,13 @@
-//! Server push over `/v1/db/{database_id}/stream` from a page: one WebSocket; `Hello` with the policy when it
-//! opens, the observer every frame, and the segments the client's cache released as
-//! `Evicted`, so the server's mirror of the cache stays true and nothing is sent twice. The
-//! server pushes segments in need order (Funkhouser §5.2.3) no further than the cache holds.
-//! Frames arrive on the socket's callback and wait in an inbox for the next animation frame.
+//! Server push over `/v1/db/{database_id}/stream` from a page: one WebSocket, a thin shell
+//! around the client engine's push session ([`portico_client::engine::push`], which says what
+//! to send each frame and what a pushed frame is). Frames arrive on the socket's callback and
+//! wait in an inbox for the next animation frame.
 
-use portico_protocol::{
-    Observer, PROTOCOL_VERSION, Policy, ServerFrame, StreamClient, StreamServer, parse_server_frame,
-};
+use portico_protocol::StreamClient;
 use std::cell::{Cell, RefCell};
 use std::collections::VecDeque;
 use std::rc::Rc;
+use std::time::Duration;
 use wasm_bindgen::prelude::*;
 use web_sys::{BinaryType, CloseEvent, MessageEvent, WebSocket};
 
@@ -17,25 +15,17 @@ use web_sys::{BinaryType, CloseEvent, MessageEvent, WebSocket};
 /// only computes the latest one anyway).
 const SEND_BACKLOG: u32 = 64 << 10;
 
-/// What the socket brought.
-pub enum Pushed {
-    /// A segment (unchecked).
-    Segment(u32, Vec<u8>),
-    /// The server reported a problem with a message; the session goes on.
-    Error(String),
-}
-
-/// One stream session.
+/// One WebSocket to the server.
 pub struct Stream {
     ws: WebSocket,
-    inbox: Rc<RefCell<VecDeque<Pushed>>>,
+    /// The address, for messages (never the token).
+    url: String,
+    inbox: Rc<RefCell<VecDeque<Vec<u8>>>>,
     open: Rc<Cell<bool>>,
-    /// Why the socket closed, once it has.
-    closed: Rc<RefCell<Option<String>>>,
-    /// Whether it closed because the server serves another database now.
-    stale: Rc<Cell<bool>>,
-    /// Segments the cache released before the session opened: sent right after `Holding`.
-    evicted_early: Rc<RefCell<Vec<u32>>>,
+    /// Half the handshake, once it is open: the round trip the server counts deadlines with.
+    rtt_ms: Rc<Cell<f64>>,
+    /// The close frame's code and reason, once it has closed.
+    closed: Rc<RefCell<Option<(u16, String)>>>,
     _callbacks: Vec<Closure<dyn FnMut(JsValue)>>,
 }
 
@@ -64,18 +54,10 @@ fn url(base: &str, db: Option<&str>) -> Result<String, String> {
 }
 
 impl Stream {
-    /// Opens a session with the server at `base` on database `db`; `Hello` goes as soon as it
-    /// opens, then `Holding` with what the cache holds (`holding`: a session opened again after
-    /// one ended), so the server does not push it again.
+    /// Opens a socket to the server at `base` on database `db`.
     /// `token`: the server's `--token`, given as `?token=` (a browser cannot set headers on a
     /// WebSocket).
-    pub fn open(
-        base: &str,
-        db: Option<&str>,
-        token: Option<&str>,
-        policy: Policy,
-        holding: &[u32],
-    ) -> Result<Stream, String> {
+    pub fn open(base: &str, db: Option<&str>, token: Option<&str>) -> Result<Stream, String> {
         // Messages name `url`; only the socket gets the token.
         let url = url(base, db)?;
         let with_token = match token {
@@ -90,38 +72,16 @@ impl Stream {
         ws.set_binary_type(BinaryType::Arraybuffer);
         let inbox = Rc::new(RefCell::new(VecDeque::new()));
         let open = Rc::new(Cell::new(false));
+        let rtt_ms = Rc::new(Cell::new(0.0));
         let closed = Rc::new(RefCell::new(None));
         let mut callbacks = Vec::new();
 
-        let evicted_early = Rc::new(RefCell::new(Vec::new()));
-        let (o, socket, early) = (open.clone(), ws.clone(), evicted_early.clone());
-        // The handshake took a TCP and an HTTP round trip: half of it is the round trip the
-        // server counts its push deadlines with.
+        // The handshake took a TCP and an HTTP round trip: half of it is the round trip.
         let opened = js_sys::Date::now();
-        let holding = (!holding.is_empty())
-            .then(|| {
-                let deltas = portico_protocol::encode_held(holding.iter().copied());
-                portico_protocol::to_bincode(&StreamClient::Holding(deltas)).ok()
-            })
-            .flatten();
+        let (o, r) = (open.clone(), rtt_ms.clone());
         let on_open = Closure::<dyn FnMut(JsValue)>::new(move |_| {
-            let rtt_ms = ((js_sys::Date::now() - opened) / 2.0).clamp(0.0, 10_000.0) as u32;
-            let hello = portico_protocol::to_bincode(&StreamClient::Hello {
-                version: PROTOCOL_VERSION,
-                policy,
-                rate_bytes_per_s: u64::MAX / 2,
-                rtt_ms,
-            });
-            let sent = hello.is_ok_and(|h| socket.send_with_u8_array(&h).is_ok());
-            if sent && let Some(h) = &holding {
-                let _ = socket.send_with_u8_array(h);
-            }
-            let early = std::mem::take(&mut *early.borrow_mut());
-            if sent && !early.is_empty() {
-                let evicted = portico_protocol::to_bincode(&StreamClient::Evicted(early));
-                let _ = evicted.map(|e| socket.send_with_u8_array(&e));
-            }
-            o.set(sent);
+            r.set(((js_sys::Date::now() - opened) / 2.0).clamp(0.0, 10_000.0));
+            o.set(true);
         });
         ws.set_onopen(Some(on_open.as_ref().unchecked_ref()));
         callbacks.push(on_open);
@@ -134,79 +94,63 @@ impl Stream {
             let Ok(buf) = e.data().dyn_into::<js_sys::ArrayBuffer>() else {
                 return;
             };
-            let bytes = js_sys::Uint8Array::new(&buf).to_vec();
-            let pushed = match parse_server_frame(&bytes) {
-                Ok(ServerFrame::Segment(id, b)) => Pushed::Segment(id, b.to_vec()),
-                Ok(ServerFrame::Control(StreamServer::Dropped(_))) => return,
-                // This client reads the whole manifest and never asks for pages.
-                Ok(ServerFrame::Page(_)) => {
-                    Pushed::Error("stream: a page came unasked for".to_string())
-                }
-                Ok(ServerFrame::Control(StreamServer::Error(e))) => {
-                    Pushed::Error(format!("stream: {}: {}", e.code, e.message))
-                }
-                Err(e) => Pushed::Error(format!("stream: a frame does not decode: {e}")),
-            };
-            i.borrow_mut().push_back(pushed);
+            i.borrow_mut()
+                .push_back(js_sys::Uint8Array::new(&buf).to_vec());
         });
         ws.set_onmessage(Some(on_message.as_ref().unchecked_ref()));
         callbacks.push(on_message);
 
-        let stale = Rc::new(Cell::new(false));
-        let (o, c, u, st) = (open.clone(), closed.clone(), url.clone(), stale.clone());
+        let (o, c) = (open.clone(), closed.clone());
         let on_close = Closure::<dyn FnMut(JsValue)>::new(move |e: JsValue| {
             o.set(false);
-            let (code, why) = e
+            let close = e
                 .dyn_into::<CloseEvent>()
-                .map(|e| {
-                    let why = format!("{u}: closed ({}{})", e.code(), reason(&e.reason()));
-                    (e.code(), why)
-                })
-                .unwrap_or_else(|_| (0, format!("{u}: closed")));
-            st.set(code == portico_protocol::CLOSE_STALE);
-            c.borrow_mut().get_or_insert(why);
+                .map(|e| (e.code(), e.reason()))
+                .unwrap_or((0, String::new()));
+            c.borrow_mut().get_or_insert(close);
         });
         ws.set_onclose(Some(on_close.as_ref().unchecked_ref()));
         callbacks.push(on_close);
 
         Ok(Stream {
             ws,
+            url,
             inbox,
             open,
+            rtt_ms,
             closed,
-            stale,
-            evicted_early,
             _callbacks: callbacks,
         })
     }
 
-    /// Whether the session is open (Hello sent).
+    /// The address (without the token).
+    pub fn url(&self) -> &str {
+        &self.url
+    }
+
+    /// Whether the socket is open.
     pub fn is_open(&self) -> bool {
         self.open.get()
     }
 
-    /// Why the session ended, once it has.
-    pub fn closed(&self) -> Option<String> {
+    /// Half the handshake's time (known once open).
+    pub fn rtt(&self) -> Duration {
+        Duration::from_secs_f64(self.rtt_ms.get() / 1000.0)
+    }
+
+    /// The close frame's code and reason, once the socket has closed.
+    pub fn closed(&self) -> Option<(u16, String)> {
         self.closed.borrow().clone()
     }
 
-    /// Whether the server closed it because it serves another database now
-    /// ([`portico_protocol::CLOSE_STALE`]): opening it again cannot help.
-    pub fn stale(&self) -> bool {
-        self.stale.get()
-    }
-
-    /// What arrived since the last call, oldest first, up to about `budget` bytes (at least
-    /// one message); the rest stays for the next call.
-    pub fn take(&self, budget: u64) -> Vec<Pushed> {
+    /// The frames that arrived since the last call, oldest first, up to about `budget` bytes
+    /// (at least one); the rest stays for the next call.
+    pub fn take(&self, budget: u64) -> Vec<Vec<u8>> {
         let mut inbox = self.inbox.borrow_mut();
         let mut out = Vec::new();
         let mut taken = 0u64;
-        while let Some(p) = inbox.front() {
-            let bytes = match p {
-                Pushed::Segment(_, b) => b.len() as u64,
-                Pushed::Error(_) => 0,
-            };
+        while let Some(f) = inbox.front() {
+            let bytes = f.len() as u64;
             if !out.is_empty() && taken + bytes > budget {
                 break;
             }
@@ -216,38 +160,16 @@ impl Stream {
         out
     }
 
-    fn send(&self, msg: &StreamClient) {
+    /// Sends a message; an observer is skipped while the socket's send buffer is backed up.
+    pub fn send(&self, msg: &StreamClient) {
+        if !self.is_open()
+            || matches!(msg, StreamClient::Observer(_)) && self.ws.buffered_amount() >= SEND_BACKLOG
+        {
+            return;
+        }
         if let Ok(bytes) = portico_protocol::to_bincode(msg) {
             let _ = self.ws.send_with_u8_array(&bytes);
         }
-    }
-
-    /// This frame's observer (skipped while the socket's send buffer is backed up).
-    pub fn observe(&self, obs: Observer) {
-        if self.is_open() && self.ws.buffered_amount() < SEND_BACKLOG {
-            self.send(&StreamClient::Observer(obs));
-        }
-    }
-
-    /// Segments the cache released: the server's mirror forgets them (released before the
-    /// session opened: told right after `Holding`).
-    pub fn evicted(&self, ids: Vec<u32>) {
-        if ids.is_empty() {
-            return;
-        }
-        if self.is_open() {
-            self.send(&StreamClient::Evicted(ids));
-        } else if self.closed().is_none() {
-            self.evicted_early.borrow_mut().extend(ids);
-        }
-    }
-}
-
-fn reason(r: &str) -> String {
-    if r.is_empty() {
-        String::new()
-    } else {
-        format!(", {r}")
     }
 }
 

@@ -23,12 +23,7 @@ use portico_render::{Draw, GpuMesh, GpuTexture, Renderer};
 use serde::Serialize;
 use std::sync::Arc;
 
-/// Vertical field of view (radians), as `portico walk`'s default.
-pub const FOVY: f32 = 60.0 * std::f32::consts::PI / 180.0;
-/// Walking speed (m/s) and turn rate (rad/s) the observer announces (as `portico walk`).
-pub const SPEED: f32 = 2.0;
-/// See [`SPEED`].
-pub const TURN: f32 = 2.0;
+pub use portico_client::defaults::{MAX_SPEED as SPEED, MAX_TURN as TURN};
 
 /// A resident segment.
 pub enum Resident {
@@ -213,12 +208,12 @@ impl Viewer {
                             })
                     };
                     match made {
-                        Ok((value, charge)) => match self.cache.insert(id, value, charge) {
-                            Ok(released) => self.io.evicted(self.model.parts.with_parts(released)),
-                            Err(_) => {
+                        // What the cache released leaves the held set the next frame reports.
+                        Ok((value, charge)) => {
+                            if self.cache.insert(id, value, charge).is_err() {
                                 self.too_big.insert(id);
                             }
-                        },
+                        }
                         Err(e) => {
                             self.too_big.insert(id);
                             self.stats.unusable_segments += 1;
@@ -301,7 +296,15 @@ impl Viewer {
         self.stats.touring = self.touring.is_some();
         let size = (self.config.width, self.config.height);
         let aspect = size.0 as f32 / size.1.max(1) as f32;
-        let obs = view::observer(eye, dir, motion, FOVY, aspect, SPEED, TURN);
+        let obs = view::observer(
+            eye,
+            dir,
+            motion,
+            portico_client::defaults::fov_y(),
+            aspect,
+            SPEED,
+            TURN,
+        );
         self.draw(&obs, size, now_ms);
         // A held texture segment with its parts, and the parts waiting for the rest.
         let held = self

@@ -5,5 +5,7 @@
 //! share every decision and are tested on a simulated clock in milliseconds.
 //!
 //! - [`pull`]: reads over `POST /v1/prefetch` and `GET /v1/batch` (Funkhouser §5.2.3, Ch. 6).
+//! - [`push`]: one `/v1/stream` session: what to send each frame, what a pushed frame is.
 
 pub mod pull;
+pub mod push;
