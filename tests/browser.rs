@@ -33,7 +33,7 @@ fn viewer_dir() -> PathBuf {
 
 /// Why the test cannot run here, if it cannot.
 fn missing() -> Option<String> {
-    if !portico_server::viewer::is_built(&viewer_dir()) {
+    if !portico_server::viewer_is_built(&viewer_dir()) {
         return Some(format!(
             "{} holds no built viewer (run `bash web/build.sh`)",
             viewer_dir().display()

@@ -178,7 +178,7 @@ fn three_replicas_behind_nginx_survive_losing_one() {
     let db = build_tiny(dir.path());
     // The browser viewer, where `web/build.sh` built it (CI does).
     let viewer = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/viewer");
-    let viewer = portico_server::viewer::is_built(&viewer).then_some(viewer);
+    let viewer = portico_server::viewer_is_built(&viewer).then_some(viewer);
     assert!(
         viewer.is_some() || std::env::var_os("CI").is_none(),
         "no built viewer in target/viewer, but CI is set"

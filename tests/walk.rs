@@ -456,10 +456,7 @@ fn a_rebuild_and_reload_mid_walk_sends_no_segment_of_the_new_file() {
     let s = walk(&cfg, &mut |done, _| {
         if done == 20 {
             let (swapped, _) = tokio::sync::oneshot::channel();
-            let _ = control.send(portico_server::listen::Control::Reload(
-                next.clone(),
-                swapped,
-            ));
+            let _ = control.send(portico_server::Control::Reload(next.clone(), swapped));
         }
     })
     .unwrap();

@@ -26,7 +26,7 @@ pub fn run(data: &[u8]) -> usize {
     ];
     let mut answered = 0;
     for req in decoded.into_iter().flatten() {
-        let Ok(held) = portico_server::routes::validate(&req, segments) else {
+        let Ok(held) = portico_server::validate_prefetch(&req, segments) else {
             continue;
         };
         let budget = Budget::until(Instant::now() + Duration::from_millis(250));

@@ -6,31 +6,42 @@
 //! Stateless apart from stream sessions, so any number of replicas can serve one file behind a
 //! load balancer or cache. No global lock on the hot path: the database is read-only, decoded
 //! stab lists sit in `OnceLock`s, and metrics are atomics. Hostile or unlucky clients are
-//! bounded everywhere: CPU work runs on compute slots with a deadline ([`compute`]), connections
-//! are capped and must send their headers in time ([`listen`]) and take their answers in time
-//! ([`timed`]), stream sessions compute only their latest observer and name their database
-//! ([`stream`]), static files hold no descriptor ([`viewer`]), and every error is JSON
-//! ([`guard`]).
+//! bounded everywhere: CPU work runs on compute slots with a deadline (`compute`), connections
+//! are capped and must send their headers in time (`listen`) and take their answers in time
+//! (`timed`), stream sessions compute only their latest observer and name their database
+//! (`stream`), static files hold no descriptor (`viewer`), and every error is JSON
+//! (`guard`).
 
-pub mod compute;
-pub mod conditional;
-pub mod config;
-pub mod encoding;
-pub mod error;
-pub mod guard;
-pub mod listen;
-pub mod metrics;
-pub mod paged;
-pub mod process;
-pub mod routes;
-pub mod state;
-pub mod stream;
-pub mod timed;
-pub mod track;
-pub mod viewer;
+// Unsafe code only where each use is allowed by name, with its SAFETY note (memory maps,
+// C decoders and libc calls).
+#![deny(unsafe_code)]
+
+mod compute;
+mod conditional;
+mod config;
+mod encoding;
+mod error;
+mod guard;
+mod listen;
+mod metrics;
+mod pages;
+mod process;
+mod respond;
+mod routes;
+mod state;
+mod stream;
+mod timed;
+mod track;
+mod validate;
+mod viewer;
 
 pub use config::Config;
+pub use listen::{Control, Drained, run as serve_with_control};
+pub use respond::IMMUTABLE;
 pub use state::AppState;
+pub use stream::{INBOUND_RATE, PAGES_PER_UPDATE};
+pub use validate::validate as validate_prefetch;
+pub use viewer::{FILES as VIEWER_FILES, is_built as viewer_is_built};
 
 use axum::Router;
 use axum::extract::{DefaultBodyLimit, Request, State};
@@ -52,8 +63,8 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/db/{db}/prefetch", post(routes::prefetch_in))
         .layer(timeout)
         .route("/v1/manifest", get(routes::manifest))
-        .route("/v1/manifest/core", get(paged::core))
-        .route("/v1/db/{db}/pages/{cell}", get(paged::page))
+        .route("/v1/manifest/core", get(routes::core))
+        .route("/v1/db/{db}/pages/{cell}", get(routes::page))
         .route("/v1/cells", get(routes::cells))
         .route("/v1/db/{db}/segments/{id}", get(routes::segment_in))
         .route("/v1/db/{db}/batch", get(routes::batch_in))
@@ -123,7 +134,7 @@ fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
     a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
-/// Serves until `shutdown` completes, then drains (see [`listen::run`]): for tests and
+/// Serves until `shutdown` completes, then drains (see [`serve_with_control`]): for tests and
 /// embedders that need no reload.
 pub async fn serve(
     state: Arc<AppState>,

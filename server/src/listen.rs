@@ -54,6 +54,7 @@ pub fn default_max_connections() -> usize {
 
 /// Raises the soft limit on open files to the hard limit; returns the soft limit now in force.
 #[cfg(unix)]
+#[allow(unsafe_code)] // libc's rlimit calls: see the SAFETY note.
 fn raise_fd_limit() -> Option<u64> {
     let mut lim = libc::rlimit {
         rlim_cur: 0,

@@ -9,6 +9,7 @@ use std::sync::atomic::Ordering::Relaxed;
 
 /// User plus system CPU seconds this process has used (`getrusage`, microsecond resolution).
 #[cfg(unix)]
+#[allow(unsafe_code)] // libc's getrusage: see the SAFETY notes.
 pub fn cpu_seconds() -> Option<f64> {
     // SAFETY: an all-zero rusage is a valid value of this plain C struct.
     let mut u: libc::rusage = unsafe { std::mem::zeroed() };

@@ -26,10 +26,10 @@ pub struct AppState {
     pub database_id: String,
     /// The manifest, bincode-encoded and gzip-compressed once at start-up.
     pub manifest_bincode: Precompressed,
-    /// The paged manifest's core ([`crate::paged`]), bincode and gzip, made at start-up.
+    /// The paged manifest's core (the `pages` module), bincode and gzip, made at start-up.
     pub core_bincode: Precompressed,
-    /// Cells' pages made so far ([`crate::paged`]).
-    pub pages: crate::paged::Pages,
+    /// Cells' pages made so far (the `pages` module).
+    pub pages: crate::pages::Pages,
     /// The cell of each stab list segment.
     pub stab_cells: std::collections::HashMap<u32, u32>,
     /// The stored cell graph segment and its gzip coding, when the model has cells.
@@ -41,7 +41,7 @@ pub struct AppState {
     /// One permit per allowed stream session.
     pub sessions: Arc<Semaphore>,
     /// Turns for the large stream messages decoded on the blocking pool (one per compute
-    /// slot, across all sessions: [`crate::stream`]).
+    /// slot, across all sessions: the `stream` module).
     pub heavy: Semaphore,
     /// Flips to `true` when the server shuts down; stream sessions watch it and close.
     pub shutdown: watch::Sender<bool>,
@@ -91,11 +91,9 @@ impl AppState {
         let stab_cells = db
             .header()
             .cells
-            .iter()
-            .flat_map(|c| c.stab_segments.iter().enumerate())
-            .filter(|(_, s)| **s != u32::MAX)
-            .map(|(cell, &s)| (s, cell as u32))
-            .collect();
+            .as_ref()
+            .map(|c| c.stab_cells())
+            .unwrap_or_default();
         let cells_bincode = match &db.header().cells {
             Some(c) => Some(Precompressed::new(db.segment(c.graph_segment)?)),
             None => None,
@@ -112,7 +110,7 @@ impl AppState {
         let prefetcher = Prefetcher::new(db)?;
         let config_slots = config.compute_slots.max(1);
         let core_bincode =
-            crate::paged::core_bincode(prefetcher.database(), prefetcher.graph(), &database_id)
+            crate::pages::core_bincode(prefetcher.database(), prefetcher.graph(), &database_id)
                 .map(|b| Precompressed::new(Bytes::from(b)))
                 .map_err(|e| DataError::NotFound(format!("core manifest does not encode: {e}")))?;
         prefetcher
@@ -138,7 +136,7 @@ impl AppState {
         }))
     }
 
-    /// Stream sessions open on this database (the gauge in [`Metrics`] counts every
+    /// Stream sessions open on this database (the gauge in the metrics counts every
     /// generation's).
     pub fn sessions_open(&self) -> u64 {
         self.config

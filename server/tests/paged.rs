@@ -61,10 +61,7 @@ async fn the_core_and_the_pages_make_up_the_whole_manifest() {
         let url = format!("{}/v1/db/{}/pages/{cell}", s.base, whole.database_id);
         let r = get(&http, &url).await;
         assert_eq!(r.status(), 200, "cell {cell}");
-        assert_eq!(
-            r.headers()["cache-control"],
-            portico_server::routes::IMMUTABLE
-        );
+        assert_eq!(r.headers()["cache-control"], portico_server::IMMUTABLE);
         let page: CellPage = portico_protocol::from_bincode(&r.bytes().await.unwrap()).unwrap();
         assert_eq!(page.graph, graph.part(&db.stab_list(cell as u32).unwrap()));
         assert!(page.graph.cells.iter().any(|(c, _)| *c == cell as u32));

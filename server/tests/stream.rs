@@ -12,8 +12,8 @@ use portico_protocol::{
     LookaheadCull, Observer, PROTOCOL_VERSION, Policy, PrefetchRequest, ServerFrame, StreamClient,
     StreamServer,
 };
+use portico_server::AppState;
 use portico_server::Config;
-use portico_server::state::AppState;
 use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::{Duration, Instant};

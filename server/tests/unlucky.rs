@@ -68,7 +68,7 @@ async fn close_code(ws: &mut Ws) -> Option<u16> {
 /// Fault 1: a paged session with a wide policy made a page for every stab list of its need list
 /// on one compute slot, without looking at the deadline (26.6 s per update on flattened
 /// `mega`), and two such sessions made every prefetch answer 503. Now one update makes at most
-/// [`portico_server::stream::PAGES_PER_UPDATE`] pages, within the deadline.
+/// [`portico_server::PAGES_PER_UPDATE`] pages, within the deadline.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn wide_paged_sessions_leave_prefetch_answering() {
     let _one = SERIAL.lock().await;
@@ -102,7 +102,7 @@ async fn wide_paged_sessions_leave_prefetch_answering() {
     let stabs = s.state.stab_cells.len();
     let pages = s.state.pages.len();
     assert!(
-        pages <= 2 * portico_server::stream::PAGES_PER_UPDATE && pages < stabs,
+        pages <= 2 * portico_server::PAGES_PER_UPDATE && pages < stabs,
         "{pages} pages made for one update of two sessions ({stabs} stab lists)"
     );
     // Both sessions keep moving while a normal client asks for prefetch answers.
@@ -244,7 +244,7 @@ async fn a_new_hello_restarts_the_pacing_clock() {
 }
 
 /// Fault 7: Evicted floods were decoded and applied on the async workers (9 ms per MiB).
-/// What a client sends is now read at most at [`portico_server::stream::INBOUND_RATE`] and
+/// What a client sends is now read at most at [`portico_server::INBOUND_RATE`] and
 /// large messages are handled on the blocking pool: `/healthz` stays fast, and the flood is
 /// held back.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -289,8 +289,8 @@ async fn evicted_floods_are_read_at_a_bounded_rate_and_health_stays_fast() {
             .unwrap_or(8 << 20)
     };
     let buffers = most("/proc/sys/net/ipv4/tcp_wmem") + most("/proc/sys/net/ipv4/tcp_rmem");
-    let burst = 4 * portico_server::stream::INBOUND_RATE as usize;
-    let bound = (3 * portico_server::stream::INBOUND_RATE as usize + burst + buffers) / bytes + 2;
+    let burst = 4 * portico_server::INBOUND_RATE as usize;
+    let bound = (3 * portico_server::INBOUND_RATE as usize + burst + buffers) / bytes + 2;
     for t in taken {
         assert!(
             t <= bound,

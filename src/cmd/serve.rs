@@ -5,8 +5,8 @@
 //! last reader is done, never remapped under them) and are closed after 10 s.
 
 use anyhow::{Context, Result};
-use portico_server::listen::{self, Control, Drained};
 use portico_server::{AppState, Config};
+use portico_server::{Control, Drained};
 use std::net::SocketAddr;
 use std::path::PathBuf;
 use std::time::Duration;
@@ -63,11 +63,11 @@ pub struct Args {
 /// (`target/release/portico` → `target/viewer`).
 fn viewer_dir(given: Option<PathBuf>) -> Result<Option<PathBuf>> {
     if let Some(d) = given {
-        if !portico_server::viewer::is_built(&d) {
+        if !portico_server::viewer_is_built(&d) {
             anyhow::bail!(
                 "--viewer {0}: no built viewer there (index.html, {1}); build one with `bash web/build.sh {0}`",
                 d.display(),
-                portico_server::viewer::FILES.join(", ")
+                portico_server::VIEWER_FILES.join(", ")
             );
         }
         return Ok(Some(d));
@@ -77,7 +77,7 @@ fn viewer_dir(given: Option<PathBuf>) -> Result<Option<PathBuf>> {
         .and_then(|e| Some(e.parent()?.parent()?.join("viewer")));
     Ok(std::iter::once(PathBuf::from("target/viewer"))
         .chain(beside)
-        .find(|d| portico_server::viewer::is_built(d)))
+        .find(|d| portico_server::viewer_is_built(d)))
 }
 
 /// Opens the database and serves until interrupted.
@@ -131,7 +131,7 @@ pub fn run(a: Args) -> Result<()> {
         let (control, rx) = tokio::sync::mpsc::unbounded_channel();
         let listener = tokio::net::TcpListener::from_std(listener)?;
         let mut serving = state.clone();
-        let server = tokio::spawn(listen::run(listener, state, rx, move |reload, d: Drained| {
+        let server = tokio::spawn(portico_server::serve_with_control(listener, state, rx, move |reload, d: Drained| {
             let what = if reload { "reload" } else { "stop" };
             if d.closed == 0 && d.sessions_left == 0 {
                 eprintln!("{what}: {} connections finished their requests", d.finished);

@@ -76,11 +76,11 @@ pub fn serve_controlled(
     state: Arc<AppState>,
 ) -> (
     String,
-    tokio::sync::mpsc::UnboundedSender<portico_server::listen::Control>,
+    tokio::sync::mpsc::UnboundedSender<portico_server::Control>,
 ) {
     let (control, rx) = tokio::sync::mpsc::unbounded_channel();
     let url = in_background(move |l| async move {
-        portico_server::listen::run(l, state, rx, |_, _| {})
+        portico_server::serve_with_control(l, state, rx, |_, _| {})
             .await
             .unwrap();
     });

@@ -69,7 +69,7 @@ impl Session {
                 rtt_ms,
                 ..
             }) => {
-                if let Err(e) = crate::routes::validate_policy(&policy) {
+                if let Err(e) = crate::validate::validate_policy(&policy) {
                     return error(e);
                 }
                 if policy != self.policy {
@@ -98,7 +98,7 @@ impl Session {
                 Ok(None)
             }
             Ok(StreamClient::Observer(obs)) => {
-                if let Err(e) = crate::routes::validate_observer(&obs) {
+                if let Err(e) = crate::validate::validate_observer(&obs) {
                     return error(e);
                 }
                 Ok(self.on_observer(obs))

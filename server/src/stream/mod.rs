@@ -31,7 +31,7 @@
 //!   loses its slot, and a stop or reload ends the session whatever the client does;
 //! - a silent client is closed after the idle timeout;
 //! - Hello, observers and id lists are checked, every number before it reaches time arithmetic
-//!   ([`crate::routes::validate_policy`], and every wait clamped);
+//!   ([`crate::validate::validate_policy`], and every wait clamped);
 //! - what a client sends is read at most at [`INBOUND_RATE`], and a large message is decoded
 //!   and applied on the blocking pool, never on an async worker;
 //! - a session that ends for any reason, a panic included, releases its slot.

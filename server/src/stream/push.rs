@@ -43,7 +43,7 @@ impl Session {
                     }
                     .map_err(Error::from)?;
                     // The pages of the list's stab lists, made here on the compute slot so that
-                    // pushing them costs the async worker nothing ([`crate::paged`]).
+                    // pushing them costs the async worker nothing ([`crate::pages`]).
                     // Nearest first, at most PAGES_PER_UPDATE new ones and none past the
                     // deadline: a list wider than the page cache must not make every page on
                     // every update; the rest come with later lists, or the client reads them.
@@ -194,7 +194,7 @@ impl Session {
 
     /// The next segment of the list the client lacks, as a frame (or an error for a segment
     /// that cannot be read), and the pacing clock advanced by its size.
-    /// A paged session gets a stab list's page first ([`crate::paged`]), then the stab list.
+    /// A paged session gets a stab list's page first ([`crate::pages`]), then the stab list.
     pub(super) fn next_push(&mut self) -> Option<Message> {
         let segment = match self.after_page.take() {
             Some(s) => s,

@@ -4,15 +4,9 @@
 //! manifest is 9.6 MB and the cell graph 0.9 MB, then with each stab list the page its cell
 //! sees (median 10 KB).
 
-use crate::conditional::not_modified;
 use crate::encoding::Precompressed;
-use crate::encoding::accepts_gzip;
 use crate::error::Error;
-use crate::routes::{IMMUTABLE, current, document, revalidated, wants_bincode};
 use crate::state::AppState;
-use axum::extract::{Path, State};
-use axum::http::{HeaderMap, HeaderValue, StatusCode, header};
-use axum::response::{IntoResponse, Response};
 use bytes::Bytes;
 use portico_data::Database;
 use portico_data::cells::CellGraph;
@@ -134,7 +128,7 @@ pub fn core_bincode(
 
 impl AppState {
     /// Cell `cell`'s page, bincode-encoded, made on first use (CPU work: callers run it on a
-    /// compute slot, [`crate::compute`], and make the coding they send there too).
+    /// compute slot, `compute`, and make the coding they send there too).
     ///
     /// # Errors
     /// 404 for a cell that does not exist or has no stab list (dead, or no cells at all); 500
@@ -171,87 +165,4 @@ impl AppState {
     pub fn page_frame(&self, cell: u32) -> Option<Bytes> {
         self.pages.get(cell)?.frame.get().cloned()
     }
-}
-
-/// `GET /v1/manifest/core`: the [`CoreManifest`] (bincode only: JSON clients read the whole
-/// manifest), revalidated like the manifest. 404 for a database without cells, which has no
-/// pages: its clients read the whole manifest.
-pub async fn core(State(s): State<Arc<AppState>>, headers: HeaderMap) -> Result<Response, Error> {
-    if !wants_bincode(&headers) {
-        return Err(Error::new(
-            axum::http::StatusCode::NOT_ACCEPTABLE,
-            "not_acceptable",
-            format!(
-                "/v1/manifest/core is bincode only (Accept: {})",
-                portico_protocol::BINCODE_MIME
-            ),
-        ));
-    }
-    // Pages are cut along the stab lists: without cells there are none, and a client that
-    // started from the core would never learn an instance. It reads the whole manifest instead.
-    if s.cells_bincode.is_none() {
-        return Err(Error::not_found(
-            "this database has no cells (built with --no-cells), so no pages: read /v1/manifest",
-        ));
-    }
-    Ok(document(
-        &headers,
-        true,
-        &s.core_bincode,
-        &format!("k-{}", s.database_id),
-    ))
-}
-
-/// `GET /v1/db/{database_id}/pages/{cell}`: the cell's [`portico_protocol::Page`] (bincode,
-/// gzip-coded where accepted). The URL names the database, so the answer is immutable.
-pub async fn page(
-    State(s): State<Arc<AppState>>,
-    Path((db, raw)): Path<(String, String)>,
-    headers: HeaderMap,
-) -> Result<Response, Error> {
-    current(&s, &db)?;
-    let cell: u32 = raw
-        .parse()
-        .map_err(|_| Error::bad_request(format!("cell {raw:?} is not a number")))?;
-    if !wants_bincode(&headers) {
-        return Err(Error::new(
-            axum::http::StatusCode::NOT_ACCEPTABLE,
-            "not_acceptable",
-            format!(
-                "pages are bincode only (Accept: {})",
-                portico_protocol::BINCODE_MIME
-            ),
-        ));
-    }
-    if s.prefetcher.stab_segment(cell).is_none() {
-        return Err(Error::not_found(format!(
-            "cell {cell} has no page: it is not a live cell of this database"
-        )));
-    }
-    // The URL names the database: a client that holds the coding its Accept-Encoding picks
-    // (a page's gzip is always the smaller) has the page, which is not made to say so.
-    let name = format!("p-{cell}");
-    let held = format!(
-        "\"{name}-b{}\"",
-        if accepts_gzip(&headers) { "-gzip" } else { "" }
-    );
-    if not_modified(&headers, &held) {
-        let mut r = revalidated(StatusCode::NOT_MODIFIED.into_response(), &held);
-        r.headers_mut()
-            .insert(header::CACHE_CONTROL, HeaderValue::from_static(IMMUTABLE));
-        return Ok(r);
-    }
-    let state = s.clone();
-    let p = s
-        .compute
-        .run(move |_| {
-            let p = state.page(cell)?;
-            p.coded();
-            Ok(p)
-        })
-        .await?;
-    let mut r = document(&headers, true, p.coded(), &name);
-    r.headers_mut()
-        .insert(header::CACHE_CONTROL, HeaderValue::from_static(IMMUTABLE));
-    Ok(r)
 }
