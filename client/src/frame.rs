@@ -49,11 +49,7 @@ pub struct Scene<'a> {
 impl Scene<'_> {
     /// The segment of a cell's stab list.
     pub fn stab_segment(&self, cell: u32) -> Option<u32> {
-        let c = self.header.cells.as_ref()?;
-        c.stab_segments
-            .get(cell as usize)
-            .copied()
-            .filter(|&s| s != u32::MAX)
+        self.header.cells.as_ref()?.stab_segment(cell)
     }
 
     /// The segment of an instance's LOD `lod` (an index into its full LOD table).

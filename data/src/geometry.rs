@@ -60,6 +60,25 @@ pub struct Aabb {
     pub max: [f32; 3],
 }
 
+/// Ray–box intersection (the slab test): the interval of `t` for which `o + t·d` is inside the
+/// box, if any (`t` may be negative: behind the origin).
+pub fn slab(o: Vec3, d: Vec3, b: &Aabb) -> Option<(f32, f32)> {
+    let (mut t0, mut t1) = (f32::NEG_INFINITY, f32::INFINITY);
+    for k in 0..3 {
+        if d[k].abs() < 1e-12 {
+            if o[k] < b.min[k] || o[k] > b.max[k] {
+                return None;
+            }
+            continue;
+        }
+        let inv = 1.0 / d[k];
+        let (a, c) = ((b.min[k] - o[k]) * inv, (b.max[k] - o[k]) * inv);
+        t0 = t0.max(a.min(c));
+        t1 = t1.min(a.max(c));
+    }
+    (t0 <= t1).then_some((t0, t1))
+}
+
 impl Aabb {
     /// The empty box, the identity for [`Aabb::union`].
     pub const EMPTY: Aabb = Aabb {

@@ -52,11 +52,9 @@ impl PageBook {
     pub fn new(core: Header, instances: u32, graph: Option<GraphCore>) -> PageBook {
         let cells = core
             .cells
-            .iter()
-            .flat_map(|c| c.stab_segments.iter().enumerate())
-            .filter(|(_, s)| **s != u32::MAX)
-            .map(|(cell, &s)| (s, cell as u32))
-            .collect();
+            .as_ref()
+            .map(|c| c.stab_cells())
+            .unwrap_or_default();
         PageBook {
             core,
             instances,

@@ -123,12 +123,12 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
     }
     let cache_mb: u64 = param("cache_mb")
         .and_then(|s| s.parse().ok())
-        .unwrap_or(64)
+        .unwrap_or(portico_client::defaults::CACHE_MB)
         .clamp(1, 1 << 16);
     let budget_ms: f64 = param("budget_ms")
         .and_then(|s| s.parse::<f64>().ok())
         .filter(|b| b.is_finite())
-        .unwrap_or(50.0)
+        .unwrap_or(portico_client::defaults::FRAME_BUDGET_MS)
         .clamp(5.0, 1000.0);
     let backend = param("backend").unwrap_or_else(|| "auto".into());
     let push = param("transport").as_deref() != Some("pull");
@@ -157,7 +157,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
     let stabs = header
         .cells
         .as_ref()
-        .map(|c| c.stab_segments.iter().copied().collect())
+        .map(|c| c.stab_lists().map(|(s, _)| s).collect())
         .unwrap_or_default();
     let mips = header
         .textures

@@ -16,8 +16,9 @@
 //! always gives the same database.
 
 use super::sight::Triangles;
-use super::verify::{random_direction, slab};
+use super::verify::random_direction;
 use super::{CellGraph, StabList};
+use crate::geometry::slab;
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;

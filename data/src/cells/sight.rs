@@ -3,8 +3,8 @@
 //! rather than against the occluder boxes the precompute itself used, so occluders extracted
 //! wrongly (a wall that is not there, a door taken for a wall) show as false negatives.
 
-use super::verify::slab;
 use crate::geometry::Aabb;
+use crate::geometry::slab;
 use glam::{Mat4, Vec3};
 
 /// Every object's triangles and world bounds: its own world-space triangles, or a shape shared

@@ -12,7 +12,7 @@
 
 use super::sight::Triangles;
 use super::{CellGraph, StabList};
-use crate::geometry::Aabb;
+use crate::geometry::{Aabb, slab};
 use glam::Vec3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -182,22 +182,4 @@ pub fn cast(
                 .is_some_and(|(t0, t1)| t1 >= 0.0 && t0 <= stop + 1e-3)
         })
         .collect()
-}
-
-/// Ray–box intersection: the parameter interval inside the box, if any.
-pub fn slab(o: Vec3, d: Vec3, b: &Aabb) -> Option<(f32, f32)> {
-    let (mut t0, mut t1) = (f32::NEG_INFINITY, f32::INFINITY);
-    for k in 0..3 {
-        if d[k].abs() < 1e-12 {
-            if o[k] < b.min[k] || o[k] > b.max[k] {
-                return None;
-            }
-            continue;
-        }
-        let inv = 1.0 / d[k];
-        let (a, c) = ((b.min[k] - o[k]) * inv, (b.max[k] - o[k]) * inv);
-        t0 = t0.max(a.min(c));
-        t1 = t1.min(a.max(c));
-    }
-    (t0 <= t1).then_some((t0, t1))
 }

@@ -53,6 +53,27 @@ pub struct CellIndex {
     pub stats: crate::cells::CellStats,
 }
 
+impl CellIndex {
+    /// The segment of cell `cell`'s stab list; `None` for a dead cell or one that does not
+    /// exist.
+    pub fn stab_segment(&self, cell: u32) -> Option<u32> {
+        self.stab_segments
+            .get(cell as usize)
+            .copied()
+            .filter(|&s| s != u32::MAX)
+    }
+
+    /// Every live cell's stab-list segment, with the cell: `(segment, cell)`.
+    pub fn stab_lists(&self) -> impl Iterator<Item = (u32, u32)> + '_ {
+        (0..self.stab_segments.len() as u32).filter_map(|c| Some((self.stab_segment(c)?, c)))
+    }
+
+    /// The cell of each stab-list segment.
+    pub fn stab_cells(&self) -> std::collections::HashMap<u32, u32> {
+        self.stab_lists().collect()
+    }
+}
+
 /// One LOD of an object: where its geometry is and what it costs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct LodRecord {

@@ -172,11 +172,7 @@ impl Prefetcher {
 
     /// The segment holding a cell's stab list.
     pub fn stab_segment(&self, cell: u32) -> Option<u32> {
-        let c = self.db.header().cells.as_ref()?;
-        c.stab_segments
-            .get(cell as usize)
-            .copied()
-            .filter(|&s| s != u32::MAX)
+        self.db.header().cells.as_ref()?.stab_segment(cell)
     }
 
     /// What segment `id` costs the client's cache ([`crate::format::Header::cache_charges`]).

@@ -7,9 +7,9 @@
 //! cell"; the range cull algorithm keeps only cells that satisfy a directional constraint.
 
 use crate::cells::realtime::Frustum;
-use crate::cells::verify::slab;
 use crate::cells::{CellGraph, touches};
 use crate::geometry::Aabb;
+use crate::geometry::slab;
 use glam::Vec3;
 use portico_protocol::{LookaheadCull, Observer, Policy, RangeCull};
 use std::cmp::Reverse;

@@ -24,7 +24,7 @@ use std::sync::Arc;
 /// Image size the simulated clients compute screen sizes for (the real client's default).
 pub const SCREEN: (u32, u32) = (640, 480);
 /// Vertical field of view of the simulated clients (the real client's default, 60°).
-pub const FOVY_DEG: f32 = 60.0;
+pub const FOVY_DEG: f32 = portico_client::defaults::FOV_Y_DEGREES;
 
 /// One frame of the path: where the observer is and what it announces to the server.
 #[derive(Debug, Clone)]
@@ -96,11 +96,7 @@ impl World {
 
     /// The segment of a cell's stab list.
     pub fn stab_segment(&self, cell: u32) -> Option<u32> {
-        let c = self.header.cells.as_ref()?;
-        c.stab_segments
-            .get(cell as usize)
-            .copied()
-            .filter(|&s| s != u32::MAX)
+        self.header.cells.as_ref()?.stab_segment(cell)
     }
 
     /// The cell the eye is in (live cells only).

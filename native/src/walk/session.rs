@@ -62,7 +62,7 @@ impl<'a> Session<'a> {
             pages,
             IoConfig {
                 policy,
-                parallel: 8,
+                parallel: portico_client::defaults::PARALLEL,
                 window,
                 transport: cfg.transport,
             },
@@ -263,7 +263,7 @@ fn model_of(
     let stabs = header
         .cells
         .as_ref()
-        .map(|c| c.stab_segments.iter().copied().collect())
+        .map(|c| c.stab_lists().map(|(s, _)| s).collect())
         .unwrap_or_default();
     let textures = header
         .hierarchy
