@@ -17,12 +17,16 @@
 //!   now and which a later answer can still bring in time.
 //! - [`engine`]: the IO stage without IO — state machines every front end drives (pull, …).
 //! - [`navigate`]: Funkhouser's mouse-and-keyboard navigation (§3.3.1).
+//! - [`defaults`]: the view, pace and IO defaults every front end shares.
 //! - [`policy`], [`stats`]: prefetch policy specs, per-frame statistics.
+
+#![forbid(unsafe_code)]
 
 pub mod cache;
 pub mod cluster;
 pub mod cost;
 pub mod deadline;
+pub mod defaults;
 pub mod demand;
 pub mod elision;
 pub mod engine;

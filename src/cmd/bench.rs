@@ -20,7 +20,7 @@ pub struct Args {
     #[command(flatten)]
     route: crate::cmd::path::PathArgs,
     /// Frame-time budget of the elision algorithms, milliseconds.
-    #[arg(long, default_value_t = 50.0)]
+    #[arg(long, default_value_t = portico_client::defaults::FRAME_BUDGET_MS)]
     budget_ms: f64,
     /// Image size WxH, pixels.
     #[arg(long, default_value = values::SIZE)]
@@ -44,7 +44,7 @@ pub struct Args {
     #[arg(long, default_value_t = 5)]
     patch_px: u32,
     /// Vertical field of view, degrees.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, default_value_t = portico_client::defaults::FOV_Y_DEGREES)]
     fov: f32,
     /// Output directory (summary.json, report.md, frames.csv, PNG plots).
     #[arg(short = 'o', long, visible_alias = "output", value_name = "DIR")]

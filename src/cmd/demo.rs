@@ -51,10 +51,10 @@ pub struct Args {
     #[arg(long, default_value_t = values::LEGS)]
     legs: usize,
     /// Frame budget, ms.
-    #[arg(long, default_value_t = 50.0)]
+    #[arg(long, default_value_t = portico_client::defaults::FRAME_BUDGET_MS)]
     budget_ms: f64,
     /// Client cache budget, MiB (2^20 bytes).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = portico_client::defaults::CACHE_MB)]
     cache_mb: u64,
     /// Image size WxH, pixels.
     #[arg(long, default_value = values::SIZE)]
@@ -242,7 +242,7 @@ fn walk_tour(a: &Args, url: &str, path: &CameraPath, out: &Path) -> Result<WalkS
         png_every: (frames / 36).max(1),
         max_frames: Some(a.max_frames),
         pace: true,
-        fovy: 60f32.to_radians(),
+        fovy: portico_client::defaults::fov_y(),
         max_speed: 2.0,
         max_turn: 2.0,
         transport: portico_native::stream::Transport::Push,

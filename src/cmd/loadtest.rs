@@ -50,7 +50,7 @@ pub struct Args {
           value_parser = clap::value_parser!(u64).range(1..=1 << 20))]
     cache_mb: Vec<u64>,
     /// Frame budget (and frame time) in milliseconds.
-    #[arg(long, default_value_t = 50.0)]
+    #[arg(long, default_value_t = portico_client::defaults::FRAME_BUDGET_MS)]
     budget_ms: f64,
     /// Frames per client (default: one pass over the path; with --sweep, 400).
     #[arg(long)]

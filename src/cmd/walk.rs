@@ -4,6 +4,7 @@
 use crate::cmd::values;
 use crate::progress::Bars;
 use anyhow::{Context, Result, bail};
+use portico_client::defaults;
 use portico_client::elision::Algorithm;
 use portico_client::policy::parse_policy;
 use portico_data::path::CameraPath;
@@ -24,10 +25,10 @@ pub struct Args {
     #[command(flatten)]
     route: crate::cmd::path::PathArgs,
     /// Frame-time budget in milliseconds.
-    #[arg(long, default_value_t = 50.0)]
+    #[arg(long, default_value_t = defaults::FRAME_BUDGET_MS)]
     budget_ms: f64,
     /// Client cache budget, MiB (2^20 bytes).
-    #[arg(long, default_value_t = 64)]
+    #[arg(long, default_value_t = defaults::CACHE_MB)]
     cache_mb: u64,
     /// Image size WxH, pixels.
     #[arg(long, default_value = values::SIZE)]
@@ -58,7 +59,7 @@ pub struct Args {
     #[arg(long)]
     no_pace: bool,
     /// Vertical field of view, degrees.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, default_value_t = defaults::FOV_Y_DEGREES)]
     fov: f32,
     /// Print the summary as JSON.
     #[arg(long)]
@@ -116,8 +117,8 @@ pub fn run(a: Args) -> Result<()> {
         max_frames: a.max_frames,
         pace: !a.no_pace,
         fovy: a.fov.clamp(10.0, 150.0).to_radians(),
-        max_speed: 2.0,
-        max_turn: 2.0,
+        max_speed: defaults::MAX_SPEED,
+        max_turn: defaults::MAX_TURN,
         transport: a.transport,
         paged: !a.whole_manifest,
     };

@@ -200,7 +200,7 @@ impl BenchConfig {
             algorithms: RunKind::DEFAULT.to_vec(),
             out,
             dt_s: 0.05,
-            fovy: 60f32.to_radians(),
+            fovy: portico_client::defaults::fov_y(),
             patch_px: fidelity::DEFAULT_PATCH,
             critical: CriticalParams::default(),
             replays: Vec::new(),

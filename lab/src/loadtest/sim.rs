@@ -54,7 +54,7 @@ pub enum Mode {
 }
 
 /// Concurrent segment fetches per client (as the real client's IO stage).
-pub const PARALLEL: usize = 8;
+pub const PARALLEL: usize = portico_client::defaults::PARALLEL;
 
 /// One frame's counts.
 #[derive(Debug, Clone, Copy, Default)]
