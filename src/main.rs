@@ -1,6 +1,8 @@
 //! `portico`: one command line over the Portico crates. Each subcommand lives in
 //! `cmd/` and stays thin: parse arguments, call the library, report.
 
+#![forbid(unsafe_code)]
+
 mod cmd;
 mod progress;
 

@@ -10,6 +10,10 @@
 //! [`lod::complete_lods`] and, for `--flatten`, [`bake::bake`]) → [`format::writer::DbWriter`];
 //! servers and tools open the result with [`Database::open`].
 
+// Unsafe code only where each use is allowed by name, with its SAFETY note (memory maps,
+// C decoders and libc calls).
+#![deny(unsafe_code)]
+
 #[cfg(feature = "native")]
 pub mod bake;
 #[cfg(feature = "native")]

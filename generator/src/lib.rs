@@ -16,6 +16,8 @@
 //!
 //! The same [`Params`] always give the same bytes.
 
+#![forbid(unsafe_code)]
+
 mod assemble;
 mod furniture;
 mod glb;

@@ -6,6 +6,8 @@
 //! client drew, scored by the benchmark against the full-detail frames); each judged against its targets in words
 //! ([`verdict`]), with the plots' shared style ([`style`]) and captioned pictures ([`picture`]).
 
+#![forbid(unsafe_code)]
+
 pub mod bench;
 pub mod drawn;
 pub mod loadtest;

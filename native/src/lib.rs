@@ -4,6 +4,8 @@
 //! the headless walk ([`walk`]) and
 //! the interactive window (`window`, feature `window`).
 
+#![forbid(unsafe_code)]
+
 pub mod drive;
 pub mod io;
 pub mod net;

@@ -5,6 +5,8 @@
 //! (for people and curl), chosen by `Content-Type`. [`PROTOCOL_VERSION`] is bumped on any
 //! incompatible change; the server answers clients of another version with a clear error.
 
+#![forbid(unsafe_code)]
+
 pub mod batch;
 pub mod hex;
 mod messages;

@@ -18,6 +18,8 @@
 //! It runs on any wgpu adapter, including CPU ones (llvmpipe through GL, lavapipe through
 //! Vulkan); `WGPU_BACKEND` / `WGPU_ADAPTER_NAME` pick one.
 
+#![forbid(unsafe_code)]
+
 mod calibrate;
 mod held;
 #[cfg(not(target_arch = "wasm32"))]

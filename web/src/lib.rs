@@ -18,6 +18,8 @@
 //!
 //! Natively only [`input`] is compiled (and tested); everything else is for `wasm32`.
 
+#![forbid(unsafe_code)]
+
 pub mod input;
 #[cfg(target_arch = "wasm32")]
 mod io;

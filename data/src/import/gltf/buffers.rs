@@ -193,6 +193,7 @@ pub(super) fn data_uri(uri: &str) -> Result<Vec<u8>, String> {
 /// Decodes one `EXT_meshopt_compression` view into `count × byteStride` bytes
 /// (the extension's specification: modes ATTRIBUTES, TRIANGLES, INDICES; filters NONE,
 /// OCTAHEDRAL, QUATERNION, EXPONENTIAL, COLOR).
+#[allow(unsafe_code)] // meshoptimizer's C decoders: see the SAFETY notes below.
 fn decode_meshopt(ext: &Value, buffers: &Buffers) -> Result<(Vec<u32>, usize), String> {
     let num = |k: &str| ext[k].as_u64();
     let (Some(buffer), Some(length), Some(stride), Some(count)) = (
