@@ -34,6 +34,27 @@ pub trait Resident {
     fn stab(&self, cell: u32) -> Option<Arc<StabList>>;
 }
 
+/// A cache entry that may be a stab list (every front end's resident segment type).
+pub trait MaybeStab {
+    /// The stab list, if this entry is one.
+    fn stab_list(&self) -> Option<&Arc<StabList>>;
+}
+
+/// A front end's [`crate::cache::ObjectCache`] as the frame decision asks it, with the scene
+/// that says which segment is which cell's stab list.
+#[derive(Debug, Clone, Copy)]
+pub struct Cached<'a, V>(pub &'a crate::cache::ObjectCache<V>, pub &'a Scene<'a>);
+
+impl<V: MaybeStab> Resident for Cached<'_, V> {
+    fn has(&self, id: u32) -> bool {
+        self.0.contains(id)
+    }
+
+    fn stab(&self, cell: u32) -> Option<Arc<StabList>> {
+        self.0.get(self.1.stab_segment(cell)?)?.stab_list().cloned()
+    }
+}
+
 /// The model as the client knows it: the manifest's header, the cell graph, the instance
 /// bounds.
 #[derive(Debug, Clone, Copy)]

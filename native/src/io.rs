@@ -8,13 +8,12 @@
 use crate::drive::{Ask, Event, Fetcher, Items};
 use crate::net::Remote;
 use crate::pages::PageBook;
+use portico_client::engine::catalogue::{Kind, decode_stab, plain_geometry};
 use portico_client::parts::{Joined, Parts};
 use portico_data::cells::StabList;
-use portico_data::geometry::Aabb;
-use portico_data::texture::Wrap;
 use portico_protocol::{Policy, PrefetchRequest, PrefetchResponse, SegmentInfo};
 use portico_render::{GpuImpostor, GpuMesh, GpuTexture, Uploader};
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::sync::{Arc, Mutex, RwLock};
 use tokio::sync::{mpsc, watch};
 
@@ -55,27 +54,7 @@ pub struct IoConfig {
     pub transport: crate::stream::Transport,
 }
 
-/// What the IO stage knows of the model: each segment's size and checksum (the manifest's
-/// table; started from the core manifest, the rows the pages have brought so far, the rest
-/// [`portico_data::format::UNKNOWN_ROW`]), and which segments are stab lists.
-#[derive(Debug, Clone)]
-pub struct Catalogue {
-    /// The manifest's segment table, by id.
-    pub segments: Vec<SegmentInfo>,
-    /// Ids of the stab-list segments.
-    pub stabs: HashSet<u32>,
-    /// Texture segments: the box and atlas tile of the cluster each belongs to.
-    pub textures: HashMap<u32, (Aabb, u32)>,
-    /// Material texture segments (mip chains) and how their texture wraps.
-    pub mips: HashMap<u32, [Wrap; 2]>,
-    /// Geometry and texture segments by the bytes they occupy decoded (geometry: more than its
-    /// wire length when compressed; textures: what the GPU holds, RGBA8 or BC): the IO window
-    /// charges the larger of this and the wire length.
-    pub decoded: HashMap<u32, u64>,
-    /// Texture segments cut into parts, and the parts that came: shared by the IO thread,
-    /// which joins them, and the frame loop, which asks for and reports them.
-    pub parts: Arc<Mutex<Parts>>,
-}
+pub use portico_client::engine::catalogue::Catalogue;
 
 /// The real client's [`Fetcher`]: HTTP, checksum, decode, GPU upload.
 #[derive(Clone)]
@@ -83,6 +62,9 @@ struct Http {
     remote: Remote,
     uploader: Uploader,
     catalogue: Arc<RwLock<Catalogue>>,
+    /// Texture segments cut into parts, and the parts that came: shared with the frame loop,
+    /// which asks for and reports them.
+    parts: Arc<Mutex<Parts>>,
     /// Started from the core manifest: the pages.
     pages: Option<Arc<PageBook>>,
 }
@@ -184,18 +166,11 @@ impl Fetcher for Http {
     }
 
     fn bytes(&self, id: u32) -> u64 {
-        self.catalogue()
-            .segments
-            .get(id as usize)
-            .map_or(0, |s| s.bytes)
+        self.catalogue().wire(id)
     }
 
     fn held_bytes(&self, id: u32) -> u64 {
-        let wire = self.bytes(id);
-        self.catalogue()
-            .decoded
-            .get(&id)
-            .map_or(wire, |&d| d.max(wire))
+        self.catalogue().held(id)
     }
 }
 
@@ -229,19 +204,13 @@ impl Http {
     }
 
     /// Rejects a segment whose bytes do not match the manifest (it is counted and asked for
-    /// again later), and turns the rest into cache entries.
+    /// again later), and turns the rest into cache entries by their kind.
     fn load(&self, id: u32, bytes: &[u8]) -> anyhow::Result<Payload> {
         let catalogue = self.catalogue();
-        let row = catalogue.segments.get(id as usize).filter(|r| r.kind != 0);
-        verify(row, id, bytes)?;
-        if let Some((bounds, tile)) = catalogue.textures.get(&id) {
-            let imp = self
-                .uploader
-                .upload_impostor(bytes, bounds, *tile)
-                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
-            return Ok(Payload::Impostor(imp));
-        }
-        let parts = catalogue.parts.clone();
+        catalogue.verify(id, bytes).map_err(anyhow::Error::msg)?;
+        let kind = catalogue.kind(id);
+        drop(catalogue);
+        let parts = self.parts.clone();
         if parts.lock().unwrap_or_else(|e| e.into_inner()).is_piece(id) {
             let joined = parts
                 .lock()
@@ -250,36 +219,37 @@ impl Http {
             let Joined::Complete(head, whole) = joined else {
                 return Ok(Payload::Piece);
             };
-            let wrap = catalogue.mips.get(&head).copied().unwrap_or_default();
+            let wrap = match self.catalogue().kind(head) {
+                Kind::Texture(wrap) => wrap,
+                _ => Default::default(),
+            };
             return Ok(match self.uploader.upload_texture(&whole, wrap) {
                 Ok(t) => Payload::Joined(head, t),
                 Err(e) => Payload::Unusable(head, format!("segment {head} (joined): {e}")),
             });
         }
-        if let Some(wrap) = catalogue.mips.get(&id) {
-            let t = self
-                .uploader
-                .upload_texture(bytes, *wrap)
-                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
-            return Ok(Payload::Texture(t));
-        }
-        if catalogue.stabs.contains(&id) {
-            let list = portico_data::format::decode_segment::<StabList>(bytes)
-                .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
-            let page = self.pages.as_ref().and_then(|b| b.handed(id));
-            return Ok(Payload::Stab(Arc::new(list), page));
-        }
-        // A compressed segment is decoded here, on the IO thread, into the layout GPUs bind
-        // (after its counts are checked against its LOD record).
-        let expected = catalogue.decoded.get(&id).copied();
-        drop(catalogue);
-        let plain = portico_data::codec::to_gpu_layout_as(id, bytes, expected)
-            .map_err(anyhow::Error::msg)?;
-        let mesh = self
-            .uploader
-            .upload(&plain)
-            .map_err(|e| anyhow::anyhow!("segment {id}: {e}"))?;
-        Ok(Payload::Mesh(mesh))
+        let gpu = |e: portico_render::RenderError| anyhow::anyhow!("segment {id}: {e}");
+        Ok(match kind {
+            Kind::Impostor(bounds, tile) => Payload::Impostor(
+                self.uploader
+                    .upload_impostor(bytes, &bounds, tile)
+                    .map_err(gpu)?,
+            ),
+            Kind::Texture(wrap) => {
+                Payload::Texture(self.uploader.upload_texture(bytes, wrap).map_err(gpu)?)
+            }
+            Kind::Stab => {
+                let list = decode_stab(id, bytes).map_err(anyhow::Error::msg)?;
+                let page = self.pages.as_ref().and_then(|b| b.handed(id));
+                Payload::Stab(Arc::new(list), page)
+            }
+            // A compressed segment is decoded here, on the IO thread, into the layout GPUs
+            // bind (after its counts are checked against its LOD record).
+            Kind::Geometry(expected) => {
+                let plain = plain_geometry(id, bytes, expected).map_err(anyhow::Error::msg)?;
+                Payload::Mesh(self.uploader.upload(&plain).map_err(gpu)?)
+            }
+        })
     }
 }
 
@@ -304,6 +274,7 @@ impl IoStage {
         remote: Remote,
         uploader: Uploader,
         catalogue: Catalogue,
+        parts: Arc<Mutex<Parts>>,
         pages: Option<PageBook>,
         cfg: IoConfig,
     ) -> std::io::Result<IoStage> {
@@ -313,6 +284,7 @@ impl IoStage {
             remote,
             uploader,
             catalogue: Arc::new(RwLock::new(catalogue)),
+            parts,
             pages: pages.map(Arc::new),
         };
         let thread = std::thread::Builder::new()

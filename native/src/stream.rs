@@ -63,19 +63,8 @@ impl FromStr for Transport {
     }
 }
 
-/// How long a session may take to open before the stage reads over pull instead.
-pub const OPEN_TIMEOUT: Duration = Duration::from_secs(10);
-
-/// After a session ends or does not open, pull reads for this long before a session is tried
-/// again; each failed try doubles it up to [`REOPEN_MAX`].
-pub const REOPEN_FIRST: Duration = Duration::from_secs(1);
-
-/// The longest wait between tries to open a session.
-pub const REOPEN_MAX: Duration = Duration::from_secs(30);
-
-/// A session that lasted this long was healthy: after it ends, the wait starts again from
-/// [`REOPEN_FIRST`].
-const HEALTHY: Duration = Duration::from_secs(10);
+use portico_client::engine::reopen::Reopen;
+pub use portico_client::engine::reopen::{OPEN_TIMEOUT, REOPEN_FIRST, REOPEN_MAX};
 
 /// Runs the IO stage until the frame loop goes away: over push when `transport` says so (at
 /// `rate_bytes_per_s`, which the server may cap), over pull ([`crate::drive::drive`], with
@@ -101,7 +90,7 @@ pub async fn run<F: Fetcher>(
         return;
     }
     let mut events = 0;
-    let mut wait = REOPEN_FIRST;
+    let mut backoff = Reopen::default();
     let mut ws = match open(&fetcher).await {
         Ok(ws) => Some(ws),
         Err(Ended::Failed(why)) => {
@@ -131,9 +120,7 @@ pub async fn run<F: Fetcher>(
             let Ended::Failed(why) = ended else {
                 return stop(ended, &tx).await;
             };
-            if began.elapsed() >= HEALTHY {
-                wait = REOPEN_FIRST;
-            }
+            backoff.ended(began.elapsed());
             let msg = format!("{why}; reading over HTTP pull, opening the stream again");
             if tx.send(Event::Failed(msg)).await.is_err() {
                 return;
@@ -142,7 +129,7 @@ pub async fn run<F: Fetcher>(
         }
         // Pull until a session opens (tried in the background, so reads go on meanwhile).
         let (opened_tx, opened_rx) = tokio::sync::oneshot::channel();
-        let opener = tokio::spawn(reopen(fetcher.clone(), wait, opened_tx));
+        let opener = tokio::spawn(reopen(fetcher.clone(), backoff.clone(), opened_tx));
         let mut opened = None;
         let until = async {
             opened = opened_rx.await.ok();
@@ -162,9 +149,9 @@ pub async fn run<F: Fetcher>(
         let Some(n) = pulled else { return };
         events = n;
         match opened {
-            Some(Ok((socket, waited))) => {
+            Some(Ok((socket, after))) => {
                 ws = Some(socket);
-                wait = waited;
+                backoff = after;
             }
             Some(Err(end)) => return stop(end, &tx).await,
             // The opener failed (it cannot, short of a panic): pull for the rest of the walk.
@@ -188,19 +175,18 @@ async fn stop<B>(end: Ended, tx: &mpsc::Sender<Event<B>>) {
 type Socket =
     tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
-/// Tries to open a session after `wait`, doubling the wait after each failure; sends the
-/// first that opens (with the wait to use after it ends), or a stale database.
+/// Tries to open a session after each of `backoff`'s waits; sends the first that opens (with
+/// the back-off to go on with after it ends), or a stale database.
 async fn reopen<F: Fetcher>(
     f: F,
-    mut wait: Duration,
-    opened: tokio::sync::oneshot::Sender<Result<(Socket, Duration), Ended>>,
+    mut backoff: Reopen,
+    opened: tokio::sync::oneshot::Sender<Result<(Socket, Reopen), Ended>>,
 ) {
     loop {
-        tokio::time::sleep(wait).await;
-        wait = (wait * 2).min(REOPEN_MAX);
+        tokio::time::sleep(backoff.next_try()).await;
         match open(&f).await {
             Ok(ws) => {
-                let _ = opened.send(Ok((ws, wait)));
+                let _ = opened.send(Ok((ws, backoff)));
                 return;
             }
             Err(Ended::Failed(why)) => tracing::debug!("stream: {why}"),

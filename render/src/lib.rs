@@ -31,6 +31,7 @@ mod readback;
 mod renderer;
 #[cfg(not(target_arch = "wasm32"))]
 pub mod sheet;
+mod stand_in;
 pub mod textured;
 
 pub use calibrate::calibrate;
@@ -40,6 +41,7 @@ pub use portico_client::view::Camera;
 pub use portico_data::model::{Surface, TextureRole};
 pub use portico_data::texture::AlphaMode;
 pub use renderer::Renderer;
+pub use stand_in::StandIns;
 pub use textured::GpuImpostor;
 /// The wgpu this renderer draws with, for callers that give it a surface.
 pub use wgpu;

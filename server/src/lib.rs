@@ -65,6 +65,8 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/v1/manifest", get(routes::manifest))
         .route("/v1/manifest/core", get(routes::core))
         .route("/v1/db/{db}/pages/{cell}", get(routes::page))
+        .route("/v1/db/{db}/tour", get(routes::tour_in))
+        .route("/v1/tour", get(routes::tour))
         .route("/v1/cells", get(routes::cells))
         .route("/v1/db/{db}/segments/{id}", get(routes::segment_in))
         .route("/v1/db/{db}/batch", get(routes::batch_in))

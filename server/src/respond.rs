@@ -143,3 +143,19 @@ pub(crate) fn decode_body<T: serde::de::DeserializeOwned>(
 pub(crate) fn built(r: Result<Response<Body>, axum::http::Error>) -> Result<Response, Error> {
     r.map_err(|e| Error::internal("the response does not build", e))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_response_that_does_not_build_is_a_500_not_an_empty_200() {
+        let broken = Response::builder()
+            .header(header::CACHE_CONTROL, "no\ncache")
+            .body(Body::empty());
+        let r = built(broken).unwrap_err().into_response();
+        assert_eq!(r.status(), StatusCode::INTERNAL_SERVER_ERROR);
+        let fine = built(Response::builder().body(Body::from("x"))).unwrap();
+        assert_eq!(fine.status(), StatusCode::OK);
+    }
+}

@@ -38,6 +38,8 @@ pub struct AppState {
     pub etags: Vec<axum::http::HeaderValue>,
     manifest_json: OnceLock<Precompressed>,
     cells_json: OnceLock<Precompressed>,
+    /// The model's standard tour as JSON, made on first use (`None`: the model has none).
+    pub tour: OnceLock<Option<Bytes>>,
     /// One permit per allowed stream session.
     pub sessions: Arc<Semaphore>,
     /// Turns for the large stream messages decoded on the blocking pool (one per compute
@@ -130,6 +132,7 @@ impl AppState {
             cells_bincode,
             manifest_json: OnceLock::new(),
             cells_json: OnceLock::new(),
+            tour: OnceLock::new(),
             sessions,
             heavy: Semaphore::new(config_slots),
             shutdown: watch::channel(false).0,

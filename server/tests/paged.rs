@@ -193,3 +193,40 @@ async fn a_database_without_cells_has_no_core_and_its_whole_manifest_lists_every
     assert_eq!(whole.header.instances.len(), instances);
     assert!(whole.header.cells.is_none());
 }
+
+/// A paged client has no whole cell graph to make a tour from: the server gives the standard
+/// one, the same the whole model makes, under the database's URL.
+#[tokio::test]
+async fn the_standard_tour_is_served_under_the_database() {
+    let s = start(Config::default()).await;
+    let http = reqwest::Client::new();
+    let id = &s.state.database_id;
+    let r = get(&http, &format!("{}/v1/db/{id}/tour", s.base)).await;
+    assert_eq!(r.status(), 200);
+    assert_eq!(r.headers()["cache-control"], portico_server::IMMUTABLE);
+    let tour: portico_data::path::CameraPath = r.json().await.unwrap();
+    let db = s.state.db();
+    let h = db.header();
+    let bounds: Vec<_> = h.instances.iter().map(|i| i.bounds).collect();
+    let want = portico_data::path::standard(
+        s.state.prefetcher.graph(),
+        &h.bounds,
+        &bounds,
+        portico_data::path::PathKind::Tour,
+        6,
+        1,
+        portico_data::person::WALK_SPEED,
+        portico_data::person::TURN_DEGREES.to_radians(),
+    )
+    .unwrap();
+    assert_eq!(tour, want);
+    assert!(tour.duration() > 1.0);
+    let r = get(&http, &format!("{}/v1/db/0123abcd/tour", s.base)).await;
+    assert_eq!(r.status(), 410, "another database's tour");
+    let r = get(&http, &format!("{}/v1/tour", s.base)).await;
+    assert_eq!(r.headers()["cache-control"], "no-cache");
+    assert_eq!(
+        r.json::<portico_data::path::CameraPath>().await.unwrap(),
+        want
+    );
+}

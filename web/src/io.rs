@@ -11,24 +11,24 @@
 //!   list: what the last frame lacked, then what of the answer cannot wait.
 //!
 //! A stream that does not open within [`OPEN_WAIT`], or closes (a server restart), hands over
-//! to pull at once and is tried again after [`RETRY`].
+//! to pull at once and is tried again with the native client's back-off
+//! ([`portico_client::engine::reopen`]).
 
 use crate::net::{Remote, Stale};
 use crate::stream::Stream;
 use portico_client::defaults;
+use portico_client::engine::catalogue::{Catalogue, Kind};
+use portico_client::engine::pages::{Pages, Readiness, TakenPage};
 use portico_client::engine::pull::{self, Command, Fault, FrameState, Pull};
 use portico_client::engine::push::{self, Push, Pushed};
+use portico_client::engine::reopen::Reopen;
 use portico_protocol::{Observer, Policy, PrefetchResponse};
 use std::cell::RefCell;
 use std::collections::{HashMap, VecDeque};
 use std::rc::Rc;
-use std::time::Duration;
 use web_time::Instant;
 
-/// How long a stream may take to open before pull takes over.
-pub const OPEN_WAIT: Duration = Duration::from_secs(2);
-/// How long after a stream failed another is tried.
-pub const RETRY: Duration = Duration::from_secs(5);
+pub use portico_client::engine::reopen::OPEN_WAIT;
 /// Most pushed bytes taken into the cache in one frame: the rest waits for the next frames, so
 /// a burst of pushes never makes one long frame.
 pub const PUSHED_PER_FRAME: u64 = 4 << 20;
@@ -44,14 +44,18 @@ struct Session {
 /// What a finished request left in the inbox.
 enum Done {
     Answer(u64, Instant, anyhow::Result<PrefetchResponse>),
-    Batch(u64, anyhow::Result<Vec<(u32, anyhow::Result<Vec<u8>>)>>),
+    /// A read request's segments, each checked against its row (or why not).
+    Batch(u64, anyhow::Result<Vec<(u32, Result<Vec<u8>, String>)>>),
+    /// A cell's page fetched for a pushed stab list that came before it.
+    Page(u32, anyhow::Result<portico_data::format::CellPage>),
 }
 
 /// What the frame loop gets from the IO stage.
 pub enum Arrival {
-    /// A segment, its bytes checked against the manifest, and when a need list first asked for
-    /// it.
-    Segment(u32, Vec<u8>, Instant),
+    /// A segment, its bytes checked against the manifest, when a need list first asked for it,
+    /// and for a stab list of a paged start its cell's page (the instances it names and its
+    /// part of the cell graph).
+    Segment(u32, Vec<u8>, Instant, Option<TakenPage>),
     /// The server's eviction hints of its latest answer (§5.2.3).
     Release(Vec<u32>),
     /// A request failed; a later list may ask again.
@@ -60,18 +64,12 @@ pub enum Arrival {
     Stale(String),
 }
 
-/// Each segment's size and checksum (the manifest's table) and what it occupies decoded.
-pub struct Catalogue {
-    /// The manifest's segment table, by id.
-    pub segments: Vec<portico_protocol::SegmentInfo>,
-    /// Geometry segments by their decoded size.
-    pub decoded: HashMap<u32, u64>,
-}
-
 /// The IO stage: the pull engine, the stream session and the inbox of finished requests.
 pub struct Io {
     remote: Rc<Remote>,
-    catalogue: Rc<Catalogue>,
+    catalogue: Rc<RefCell<Catalogue>>,
+    /// Started from the core manifest: the pages learnt so far.
+    pages: Option<Rc<RefCell<Pages>>>,
     policy: Policy,
     /// What pull sends and when ([`portico_client::engine::pull`]).
     pull: Pull,
@@ -82,6 +80,8 @@ pub struct Io {
     push: bool,
     stream: Option<Session>,
     retry_at: Option<Instant>,
+    /// The wait before the next session after one failed or ended.
+    backoff: Reopen,
     /// Stream sessions opened so far.
     pub sessions: u64,
     /// Whether the stream carried the segments at the last frame.
@@ -95,6 +95,7 @@ impl Io {
     pub fn new(
         remote: Rc<Remote>,
         catalogue: Catalogue,
+        pages: Option<Pages>,
         policy: Policy,
         window: u64,
         push: bool,
@@ -103,10 +104,12 @@ impl Io {
             push,
             stream: None,
             retry_at: None,
+            backoff: Reopen::default(),
             sessions: 0,
             was_pushing: false,
             remote,
-            catalogue: Rc::new(catalogue),
+            catalogue: Rc::new(RefCell::new(catalogue)),
+            pages: pages.map(|p| Rc::new(RefCell::new(p))),
             policy,
             pull: Pull::new(policy, defaults::PARALLEL, window),
             inbox: Rc::new(RefCell::new(VecDeque::new())),
@@ -127,31 +130,34 @@ impl Io {
                     out.extend(self.arrival(event, &mut HashMap::new()));
                 }
                 Done::Batch(ticket, got) => {
-                    // Checked against the manifest here; the engine hears what came.
                     let mut bodies = HashMap::new();
                     let items = got.map_err(fault).map(|items| {
                         items
                             .into_iter()
-                            .map(|(id, item)| {
-                                let checked = item.and_then(|b| {
-                                    let info = self.catalogue.segments.get(id as usize);
-                                    portico_protocol::verify_segment(info, id, &b)
-                                        .map(|()| b)
-                                        .map_err(anyhow::Error::msg)
-                                });
-                                match checked {
-                                    Ok(b) => {
-                                        let n = b.len() as u64;
-                                        bodies.insert(id, b);
-                                        (id, Ok(n))
-                                    }
-                                    Err(e) => (id, Err(format!("{e:#}"))),
+                            .map(|(id, item)| match item {
+                                Ok(b) => {
+                                    let n = b.len() as u64;
+                                    bodies.insert(id, b);
+                                    (id, Ok(n))
                                 }
+                                Err(e) => (id, Err(e)),
                             })
                             .collect()
                     });
                     for event in self.pull.read(ticket, now, items) {
                         out.extend(self.arrival(event, &mut bodies));
+                    }
+                }
+                Done::Page(cell, got) => {
+                    if let Some(pages) = &self.pages {
+                        let mut pages = pages.borrow_mut();
+                        let taken = got.map_err(|e| format!("{e:#}")).and_then(|page| {
+                            pages.take(&mut self.catalogue.borrow_mut(), page, Some(cell))
+                        });
+                        if let Err(e) = taken {
+                            pages.release(cell);
+                            out.push(Arrival::Failed(e));
+                        }
                     }
                 }
             }
@@ -165,7 +171,12 @@ impl Io {
     /// What the stream pushed, checked like pulled segments (a rejected one is given back to
     /// the server); a closed stream hands over to pull.
     fn take_pushed(&mut self, out: &mut Vec<Arrival>) {
-        let Some(Session { socket, push, .. }) = &mut self.stream else {
+        let Some(Session {
+            socket,
+            push,
+            since,
+        }) = &mut self.stream
+        else {
             return;
         };
         let now = Instant::now();
@@ -177,19 +188,50 @@ impl Io {
                         bytes,
                         listed_at,
                     } => {
-                        let info = self.catalogue.segments.get(id as usize);
-                        match portico_protocol::verify_segment(info, id, bytes) {
-                            Ok(()) => (Arrival::Segment(id, bytes.to_vec(), listed_at), Some(id)),
+                        let ready = self.pages.as_ref().is_none_or(|p| {
+                            p.borrow().readiness(&self.catalogue.borrow(), id) == Readiness::Ready
+                        });
+                        if !ready {
+                            // Pushed before its page (or a stab list's cell page) came: given
+                            // back, the server pushes it again; a stab list's page is read.
+                            socket.send(&Push::rejected(id));
+                            if let Some(p) = &self.pages
+                                && let Some(cell) = p.borrow_mut().claim(id)
+                            {
+                                let (remote, inbox) = (self.remote.clone(), self.inbox.clone());
+                                wasm_bindgen_futures::spawn_local(async move {
+                                    let got = remote.page(cell).await;
+                                    inbox.borrow_mut().push_back(Done::Page(cell, got));
+                                });
+                            }
+                            continue;
+                        }
+                        match self.catalogue.borrow().verify(id, bytes) {
+                            Ok(()) => {
+                                let page =
+                                    self.pages.as_ref().and_then(|p| p.borrow_mut().handed(id));
+                                (
+                                    Arrival::Segment(id, bytes.to_vec(), listed_at, page),
+                                    Some(id),
+                                )
+                            }
                             Err(e) => {
                                 socket.send(&Push::rejected(id));
                                 (Arrival::Failed(e), None)
                             }
                         }
                     }
-                    // This client reads the whole manifest and never asks for pages.
-                    Pushed::Page(_) => {
-                        let why = format!("{}: a page came unasked for", socket.url());
-                        (Arrival::Failed(why), None)
+                    Pushed::Page(deflated) => {
+                        let Some(p) = &self.pages else {
+                            let why = format!("{}: a page came unasked for", socket.url());
+                            out.push(Arrival::Failed(why));
+                            continue;
+                        };
+                        let mut cat = self.catalogue.borrow_mut();
+                        match p.borrow_mut().take_frame(&mut cat, deflated) {
+                            Ok(()) => continue,
+                            Err(e) => (Arrival::Failed(e), None),
+                        }
                     }
                     Pushed::Failed(why) => (Arrival::Failed(why), None),
                     Pushed::Nothing => continue,
@@ -207,7 +249,8 @@ impl Io {
                 }
                 Fault::Failed(why) => {
                     out.push(Arrival::Failed(format!("{why}; pulling over HTTP")));
-                    self.retry_at = Some(now + RETRY);
+                    self.backoff.ended(now.duration_since(*since));
+                    self.retry_at = Some(now + self.backoff.next_try());
                 }
             }
             self.stream = None;
@@ -222,9 +265,9 @@ impl Io {
         }
     }
 
-    /// What geometry segment `id` occupies decoded, by its LOD record (bytes).
-    pub fn decoded_size(&self, id: u32) -> Option<u64> {
-        self.catalogue.decoded.get(&id).copied()
+    /// What segment `id` is, for decoding it.
+    pub fn kind(&self, id: u32) -> Kind {
+        self.catalogue.borrow().kind(id)
     }
 
     /// Keeps a stream session going when pushing; `true` while it carries the segments (or
@@ -245,7 +288,7 @@ impl Io {
                     });
                     self.sessions += 1;
                 }
-                Err(_) => self.retry_at = Some(now + RETRY),
+                Err(_) => self.retry_at = Some(now + self.backoff.next_try()),
             }
         }
         let pushing = match &mut self.stream {
@@ -258,7 +301,7 @@ impl Io {
                         self.policy,
                         u64::MAX / 2,
                         socket.rtt(),
-                        false,
+                        self.pages.is_some(),
                         held,
                         0,
                     );
@@ -281,7 +324,7 @@ impl Io {
             // Not open in time: pull, and try another session later.
             Some(_) => {
                 self.stream = None;
-                self.retry_at = Some(now + RETRY);
+                self.retry_at = Some(now + self.backoff.next_try());
                 false
             }
             None => false,
@@ -304,7 +347,8 @@ impl Io {
         Some(match event {
             pull::Event::Answer(resp) => Arrival::Release(resp.evict),
             pull::Event::Segment { id, listed_at, .. } => {
-                Arrival::Segment(id, bodies.remove(&id)?, listed_at)
+                let page = self.pages.as_ref().and_then(|p| p.borrow_mut().handed(id));
+                Arrival::Segment(id, bodies.remove(&id)?, listed_at, page)
             }
             pull::Event::Failed(why) => Arrival::Failed(why),
             pull::Event::Stale(why) => {
@@ -343,13 +387,8 @@ impl Io {
         state.consumed = self.pull.events();
         self.pull.frame(state, now);
         let catalogue = self.catalogue.clone();
-        let wire = |id: u32| catalogue.segments.get(id as usize).map_or(0, |s| s.bytes);
-        let held = |id: u32| {
-            catalogue
-                .decoded
-                .get(&id)
-                .map_or(wire(id), |&d| d.max(wire(id)))
-        };
+        let wire = |id: u32| catalogue.borrow().wire(id);
+        let held = |id: u32| catalogue.borrow().held(id);
         while let Some(cmd) = self.pull.poll(now, &wire, &held) {
             let (remote, inbox) = (self.remote.clone(), self.inbox.clone());
             match cmd {
@@ -360,10 +399,17 @@ impl Io {
                         .borrow_mut()
                         .push_back(Done::Answer(number, at, answer));
                 }),
-                Command::Read(ticket, ids) => wasm_bindgen_futures::spawn_local(async move {
-                    let got = remote.batch(&ids).await;
-                    inbox.borrow_mut().push_back(Done::Batch(ticket, got));
-                }),
+                Command::Read(ticket, ids) => {
+                    let read = crate::paged::Read {
+                        remote,
+                        catalogue: self.catalogue.clone(),
+                        pages: self.pages.clone(),
+                    };
+                    wasm_bindgen_futures::spawn_local(async move {
+                        let got = read.batch(ids).await;
+                        inbox.borrow_mut().push_back(Done::Batch(ticket, got));
+                    });
+                }
             }
         }
     }

@@ -13,7 +13,9 @@
 //! (the server's `--token`),
 //! `cache_mb` (the byte budget, default 64), `budget_ms` (the frame budget, default 50),
 //! `backend` (`webgl`, `webgpu` or `auto`, the default), `transport` (`stream`, the default, or
-//! `pull`). The fragment holds the viewpoint
+//! `pull`), `manifest` (`paged`, the default: the core manifest, then each cell's page with its
+//! stab list; or `whole`), `elision` (`optimize`, the default, or `impostors`: Maciel's cluster
+//! traversal, far clusters drawn as their textured boxes). The fragment holds the viewpoint
 //! (`#eye=x,y,z&dir=x,y,z`), kept up to date so the address shares what one sees.
 //!
 //! Natively only [`input`] is compiled (and tested); everything else is for `wasm32`.
@@ -29,6 +31,8 @@ mod minimap;
 mod net;
 #[cfg(target_arch = "wasm32")]
 mod page;
+#[cfg(target_arch = "wasm32")]
+mod paged;
 #[cfg(target_arch = "wasm32")]
 mod stream;
 #[cfg(target_arch = "wasm32")]

@@ -1,4 +1,5 @@
-//! The HTTP API from a page: manifest, cell graph, prefetch answers and segment batches, over
+//! The HTTP API from a page: the core manifest and cells' pages (or the whole manifest and cell
+//! graph), the standard tour, prefetch answers and segment batches, over
 //! the browser's `fetch` (same origin by default, so a page served by `portico serve` or by an
 //! nginx in front of it needs no CORS). Every error names the URL; `410 Gone` (the server now
 //! serves a rebuilt file) is [`Stale`].
@@ -6,8 +7,10 @@
 use anyhow::{Result, anyhow, bail};
 use js_sys::Uint8Array;
 use portico_data::cells::CellGraph;
-use portico_data::format::Header;
-use portico_protocol::{BINCODE_MIME, Manifest, PrefetchRequest, PrefetchResponse};
+use portico_data::cells::paged::GraphCore;
+use portico_data::format::{CellPage, Header};
+use portico_data::path::CameraPath;
+use portico_protocol::{BINCODE_MIME, CoreManifest, Manifest, PrefetchRequest, PrefetchResponse};
 use std::cell::RefCell;
 use wasm_bindgen::{JsCast, JsValue};
 use wasm_bindgen_futures::JsFuture;
@@ -79,6 +82,18 @@ impl Remote {
     }
 
     async fn send(&self, url: &str, body: Option<&[u8]>, what: &str) -> Result<Vec<u8>> {
+        self.send_found(url, body, what)
+            .await?
+            .ok_or_else(|| anyhow!("{url}: {what}: 404 not found"))
+    }
+
+    /// [`Remote::send`], with `Ok(None)` for `404 Not Found`.
+    async fn send_found(
+        &self,
+        url: &str,
+        body: Option<&[u8]>,
+        what: &str,
+    ) -> Result<Option<Vec<u8>>> {
         let init = RequestInit::new();
         // A request the network never answers must not hold its slot forever.
         init.set_signal(Some(&web_sys::AbortSignal::timeout_with_u32(TIMEOUT_MS)));
@@ -115,6 +130,9 @@ impl Remote {
             .await
             .map_err(|e| anyhow!("{url}: reading {what}: {}", js_error(&e)))?;
         let bytes = Uint8Array::new(&buffer).to_vec();
+        if resp.status() == 404 {
+            return Ok(None);
+        }
         if !resp.ok() {
             let msg = serde_json::from_slice::<portico_protocol::ApiError>(&bytes)
                 .map(|e| e.message)
@@ -124,7 +142,40 @@ impl Remote {
             }
             bail!("{url}: {what}: {} {msg}", resp.status());
         }
-        Ok(bytes)
+        Ok(Some(bytes))
+    }
+
+    /// `GET /v1/manifest/core`; `Ok(None)` from a server without it (404: the model has no
+    /// cells, or the server is older than the paged manifest), whose whole manifest is read
+    /// instead.
+    pub async fn core(&self) -> Result<Option<CoreManifest<Header, GraphCore>>> {
+        let url = format!("{}/v1/manifest/core", self.base);
+        let Some(b) = self.send_found(&url, None, "core manifest").await? else {
+            return Ok(None);
+        };
+        let m: CoreManifest<Header, GraphCore> = portico_protocol::from_bincode(&b)
+            .map_err(|e| anyhow!("{url}: the core manifest does not decode: {e}"))?;
+        *self.database.borrow_mut() = Some(m.database_id.clone());
+        Ok(Some(m))
+    }
+
+    /// `GET /v1/db/{id}/pages/{cell}`: the cell's page.
+    pub async fn page(&self, cell: u32) -> Result<CellPage> {
+        let url = format!("{}/pages/{cell}", self.segments_base());
+        let b = self
+            .send(&url, None, &format!("page of cell {cell}"))
+            .await?;
+        portico_protocol::from_bincode(&b).map_err(|e| anyhow!("{url}: the page: {e}"))
+    }
+
+    /// `GET /v1/tour`: the model's standard tour (asked beside the core manifest, before the
+    /// database is known); `Ok(None)` when it has none.
+    pub async fn tour(&self) -> Result<Option<CameraPath>> {
+        let url = format!("{}/v1/tour", self.base);
+        let Some(b) = self.send_found(&url, None, "tour").await? else {
+            return Ok(None);
+        };
+        serde_json::from_slice(&b).map_err(|e| anyhow!("{url}: the tour: {e}"))
     }
 
     /// `GET /v1/manifest`, then `GET /v1/cells` when the model has cells.

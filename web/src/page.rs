@@ -3,14 +3,19 @@
 //! JavaScript (the page, a test) holds.
 
 use crate::input::Input;
-use crate::io::{Catalogue, Io};
+use crate::io::Io;
 use crate::net::{Remote, js_error};
-use crate::viewer::{Model, SPEED, Stats, TURN, Viewer, navigator};
+use crate::viewer::{Model, Stats, Viewer, navigator};
 use glam::Vec3;
 use portico_client::cache::{ObjectCache, split_budget};
+use portico_client::engine::catalogue::Start;
 use portico_client::frame::Decider;
-use portico_data::path::PathKind;
+use portico_data::cells::CellGraph;
+use portico_data::cells::paged::GraphCore;
+use portico_data::format::Header;
+use portico_data::path::{CameraPath, PathKind};
 use portico_protocol::Policy;
+use portico_protocol::{CoreManifest, Manifest};
 use std::cell::RefCell;
 use std::rc::Rc;
 use wasm_bindgen::prelude::*;
@@ -134,36 +139,9 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
     let push = param("transport").as_deref() != Some("pull");
 
     let remote = Rc::new(Remote::new(&server, token));
-    let (manifest, graph) = remote
-        .model()
+    let loaded = load(&remote, param("manifest").as_deref() != Some("whole"))
         .await
         .map_err(|e| JsValue::from_str(&format!("{e:#}")))?;
-    let header = manifest.header;
-    let bounds: Vec<_> = header.instances.iter().map(|i| i.bounds).collect();
-    if let Some(h) = &header.hierarchy {
-        h.check(&bounds)
-            .map_err(|e| format!("the manifest's hierarchy: {e}"))?;
-    }
-    let tour = portico_data::path::standard(
-        graph.as_ref(),
-        &header.bounds,
-        &bounds,
-        PathKind::Tour,
-        6,
-        1,
-        SPEED,
-        TURN,
-    );
-    let stabs = header
-        .cells
-        .as_ref()
-        .map(|c| c.stab_lists().map(|(s, _)| s).collect())
-        .unwrap_or_default();
-    let mips = header
-        .textures
-        .iter()
-        .flat_map(|t| t.segments.iter().map(move |s| (s.segment, t.wrap)))
-        .collect();
 
     // WebGL2 guarantees 2048-pixel textures; the device's own limit applies from then on.
     let (width, height) = canvas_size(&canvas, 2048);
@@ -222,13 +200,22 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
 
     // What a texture costs the cache follows what the GPU holds it as (BC where offered).
     let texels = renderer.texel_format();
-    let parts = portico_client::parts::Parts::new(&header.textures);
-    let catalogue = Catalogue {
-        segments: manifest.segments,
-        decoded: header.decoded_sizes(texels).collect(),
-    };
+    let (start, tour, startup) = loaded;
+    let start = match start {
+        Loaded::Paged(core) => Start::paged(core, texels),
+        Loaded::Whole(m, graph) => Start::whole(m, graph, texels),
+    }
+    .map_err(|e| format!("{server}: {e}"))?;
+    let parts = portico_client::parts::Parts::new(&start.header.textures);
     let (cache_bytes, window_bytes) = split_budget(cache_mb.max(1) << 20);
+    let elision = match param("elision").as_deref() {
+        None | Some("") => crate::viewer::ELISION,
+        Some(e) => e
+            .parse::<portico_client::elision::Algorithm>()
+            .map_err(|e| format!("?elision=: {e}"))?,
+    };
     let policy = Policy {
+        impostors: elision == portico_client::elision::Algorithm::Impostors,
         cache_bytes,
         block_textures: texels == portico_data::texture::TexelFormat::Block,
         screen: [width, height],
@@ -242,13 +229,17 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         surface,
         config,
         cache: ObjectCache::new(cache_bytes),
-        decider: Decider::new(
-            crate::viewer::ELISION,
-            budget_ms / 1e3,
-            Some(policy.size_threshold_px),
-        ),
+        decider: Decider::new(elision, budget_ms / 1e3, Some(policy.size_threshold_px)),
         cost: Default::default(),
-        io: Io::new(remote, catalogue, policy, window_bytes, push),
+        stand_ins: Default::default(),
+        io: Io::new(
+            remote,
+            start.catalogue,
+            start.pages,
+            policy,
+            window_bytes,
+            push,
+        ),
         nav: navigator(eye, dir),
         touring: None,
         too_big: Default::default(),
@@ -259,16 +250,16 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
             budget_bytes: cache_mb << 20,
             backend: backend_name,
             texel_format: format!("{texels:?}"),
+            manifest: startup.0.into(),
+            startup_bytes: startup.1,
             ..Stats::default()
         },
         recent: Default::default(),
         last_t: None,
         model: Model {
-            header,
-            graph,
-            bounds,
-            stabs,
-            mips,
+            header: start.header,
+            graph: start.graph,
+            bounds: start.bounds,
             parts,
             tour,
         },
@@ -293,6 +284,57 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         input: handle.input,
     })
 }
+
+/// What the page read before its first frame.
+enum Loaded {
+    /// The core manifest: the rest comes page by page with the stab lists.
+    Paged(CoreManifest<Header, GraphCore>),
+    /// The whole manifest and cell graph.
+    Whole(Manifest<Header>, Option<CellGraph>),
+}
+
+/// The core manifest and the standard tour (both at once), or, from a server without a core
+/// (a model without cells, an older server) or with `paged` false, the whole manifest and cell
+/// graph, the tour made here. Also how it started and the bytes it decoded.
+async fn load(
+    remote: &Remote,
+    paged: bool,
+) -> anyhow::Result<(Loaded, Option<CameraPath>, (&'static str, u64))> {
+    if paged {
+        let (core, tour) = futures_util::future::join(remote.core(), remote.tour()).await;
+        if let Some(core) = core? {
+            let bytes = portico_protocol::to_bincode(&core).map_or(0, |b| b.len() as u64);
+            // A tour the server cannot give leaves the page without one, not without a model.
+            let tour = tour.unwrap_or_else(|e| {
+                web_sys::console::warn_1(&format!("portico: {e:#}").into());
+                None
+            });
+            return Ok((Loaded::Paged(core), tour, ("paged", bytes)));
+        }
+    }
+    let (manifest, graph) = remote.model().await?;
+    let bytes = portico_protocol::to_bincode(&manifest).map_or(0, |b| b.len() as u64)
+        + graph
+            .as_ref()
+            .map_or(0, |g| portico_data::format::encode_segment(g).len() as u64);
+    let h = &manifest.header;
+    let bounds: Vec<_> = h.instances.iter().map(|i| i.bounds).collect();
+    // The server's tour, made the same way.
+    let tour = portico_data::path::standard(
+        graph.as_ref(),
+        &h.bounds,
+        &bounds,
+        PathKind::Tour,
+        TOUR_LEGS,
+        1,
+        portico_data::person::WALK_SPEED,
+        portico_data::person::TURN_DEGREES.to_radians(),
+    );
+    Ok((Loaded::Whole(manifest, graph), tour, ("whole", bytes)))
+}
+
+/// Legs of the standard tour (as the server's `/v1/db/{id}/tour`).
+const TOUR_LEGS: usize = 6;
 
 /// The canvas's drawing-buffer size for its CSS size at the device's pixel ratio, at most
 /// `max` pixels a side (the GPU's texture limit); sets it on the canvas when it changed.

@@ -10,7 +10,8 @@ use portico_client::cache::ObjectCache;
 use portico_client::cost::CostModel;
 use portico_client::demand::lacking;
 use portico_client::elision::Algorithm;
-use portico_client::frame::{Decider, Scene};
+use portico_client::engine::catalogue::{Kind, Start, decode_stab, plain_geometry};
+use portico_client::frame::{Cached, Decider, Scene};
 use portico_client::navigate::Navigator;
 use portico_client::parts::{Joined, Parts};
 use portico_client::view::{self, Viewpoint};
@@ -19,7 +20,7 @@ use portico_data::format::Header;
 use portico_data::geometry::Aabb;
 use portico_data::path::CameraPath;
 use portico_protocol::Observer;
-use portico_render::{Draw, GpuMesh, GpuTexture, Renderer};
+use portico_render::{Draw, GpuImpostor, GpuMesh, GpuTexture, Renderer, StandIns};
 use serde::Serialize;
 use std::sync::Arc;
 
@@ -30,6 +31,17 @@ pub enum Resident {
     Mesh(GpuMesh),
     Stab(Arc<StabList>),
     Texture(GpuTexture),
+    /// A cluster's textured box (Maciel & Shirley's impostor), from its atlas tile.
+    Impostor(GpuImpostor),
+}
+
+impl portico_client::frame::MaybeStab for Resident {
+    fn stab_list(&self) -> Option<&Arc<StabList>> {
+        match self {
+            Resident::Stab(l) => Some(l),
+            _ => None,
+        }
+    }
 }
 
 /// The model as the manifest describes it.
@@ -37,9 +49,6 @@ pub struct Model {
     pub header: Header,
     pub graph: Option<CellGraph>,
     pub bounds: Vec<Aabb>,
-    pub stabs: std::collections::HashSet<u32>,
-    /// Material texture segments (mip chains) and how their texture wraps.
-    pub mips: std::collections::HashMap<u32, [portico_data::texture::Wrap; 2]>,
     /// The model's standard tour (or orbit and fly-through), where the view starts.
     pub tour: Option<CameraPath>,
     /// Texture segments cut into parts, and the parts that came.
@@ -109,6 +118,12 @@ pub struct Stats {
     /// How the GPU holds textures: `Block` (BC1 / BC3, where the adapter takes them), `Etc2`
     /// (opaque ones, where it takes ETC2 and not BC) or `Rgba8`.
     pub texel_format: String,
+    /// How the page started: `paged` (the core manifest, then each cell's page with its stab
+    /// list) or `whole` (the whole manifest and cell graph).
+    pub manifest: String,
+    /// Bytes of what it read before its first frame (decoded: the core, or the whole manifest
+    /// and cell graph).
+    pub startup_bytes: u64,
     /// Texture segments decoded and uploaded so far.
     pub texture_segments: u64,
     /// Milliseconds the page spent on them (image decode, mip chain, BC re-coding, upload):
@@ -130,6 +145,8 @@ pub struct Viewer {
     pub decider: Decider,
     pub cost: CostModel,
     pub io: Io,
+    /// The colour boxes of clusters the traversal draws as boxes.
+    pub stand_ins: StandIns,
     pub nav: Navigator,
     /// The tour and the time (s) it started, while it drives the view.
     pub touring: Option<f64>,
@@ -152,7 +169,13 @@ impl Viewer {
     fn take_arrivals(&mut self) {
         for a in self.io.take() {
             match a {
-                Arrival::Segment(id, bytes, _listed) => {
+                Arrival::Segment(id, bytes, _listed, page) => {
+                    // The instances its cell's page brought (a paged start): known from this
+                    // frame on.
+                    if let Some(p) = page {
+                        let m = &mut self.model;
+                        Start::learn(&mut m.header, m.graph.as_mut(), &mut m.bounds, &p);
+                    }
                     self.stats.segments_received += 1;
                     self.stats.bytes_received += bytes.len() as u64;
                     // A part of a texture segment waits for the rest; the last one makes the
@@ -172,31 +195,38 @@ impl Viewer {
                             continue;
                         }
                     };
-                    let made = if self.model.stabs.contains(&id) {
-                        portico_data::format::decode_segment::<StabList>(&bytes)
-                            .map(|l| (Resident::Stab(Arc::new(l)), bytes.len() as u64))
+                    let made = match self.io.kind(id) {
+                        Kind::Stab => decode_stab(id, &bytes)
+                            .map(|l| (Resident::Stab(Arc::new(l)), bytes.len() as u64)),
+                        Kind::Texture(wrap) => {
+                            let t0 = web_time::Instant::now();
+                            let made = self.renderer.upload_texture(&bytes, wrap);
+                            if let Ok(t) = &made {
+                                let s = &mut self.stats;
+                                s.texture_segments += 1;
+                                s.texture_ms += t0.elapsed().as_secs_f64() * 1e3;
+                                s.texture_texel_bytes += t.texel_bytes();
+                                s.texture_gpu_bytes += t.gpu_bytes();
+                            }
+                            made.map(|t| {
+                                // What the GPU holds: the coded image is dropped.
+                                let charge = t.gpu_bytes();
+                                (Resident::Texture(t), charge)
+                            })
                             .map_err(|e| format!("segment {id}: {e}"))
-                    } else if let Some(wrap) = self.model.mips.get(&id) {
-                        let t0 = web_time::Instant::now();
-                        let made = self.renderer.upload_texture(&bytes, *wrap);
-                        if let Ok(t) = &made {
-                            let s = &mut self.stats;
-                            s.texture_segments += 1;
-                            s.texture_ms += t0.elapsed().as_secs_f64() * 1e3;
-                            s.texture_texel_bytes += t.texel_bytes();
-                            s.texture_gpu_bytes += t.gpu_bytes();
                         }
-                        made.map(|t| {
-                            // What the GPU holds: the coded image is dropped.
-                            let charge = t.gpu_bytes();
-                            (Resident::Texture(t), charge)
-                        })
-                        .map_err(|e| format!("segment {id}: {e}"))
-                    } else {
-                        // A compressed segment is decoded here (the page has one thread),
-                        // after its counts are checked against its LOD record.
-                        let expected = self.io.decoded_size(id);
-                        portico_data::codec::to_gpu_layout_as(id, &bytes, expected)
+                        // A cluster's textured box: charged what the GPU holds.
+                        Kind::Impostor(bounds, tile) => self
+                            .renderer
+                            .upload_impostor(&bytes, &bounds, tile)
+                            .map(|i| {
+                                let charge = i.gpu_bytes().max(bytes.len() as u64);
+                                (Resident::Impostor(i), charge)
+                            })
+                            .map_err(|e| format!("segment {id}: {e}")),
+                        // A compressed segment is decoded here (the page has one thread), after
+                        // its counts are checked against its LOD record.
+                        Kind::Geometry(expected) => plain_geometry(id, &bytes, expected)
                             .and_then(|plain| {
                                 self.renderer
                                     .upload(&plain)
@@ -205,7 +235,7 @@ impl Viewer {
                             .map(|m| {
                                 let charge = m.gpu_bytes().max(bytes.len() as u64);
                                 (Resident::Mesh(m), charge)
-                            })
+                            }),
                     };
                     match made {
                         // What the cache released leaves the held set the next frame reports.
@@ -387,13 +417,27 @@ impl Viewer {
             ..Default::default()
         });
         let view_proj = view.camera.view_proj(size.0 as f32 / size.1.max(1) as f32);
-        match self.renderer.render_into(view_proj, &draws, &[], &target) {
-            Ok(timing) => self.stats.drawn_triangles = timing.triangles,
-            Err(e) => {
-                let e = format!("drawing: {e}");
-                drop(draws);
-                self.fail(e);
+        // The clusters the traversal drew as boxes: textured where the atlas tile is
+        // resident, else in their colours.
+        let textured = match &header.hierarchy {
+            Some(h) => {
+                self.stand_ins.update(h, &d.boxes, &self.renderer);
+                let cache = &self.cache;
+                let impostor = |s| match cache.get(s) {
+                    Some(Resident::Impostor(i)) => Some(i),
+                    _ => None,
+                };
+                self.stand_ins.draws(h, &d.boxes, impostor, &mut draws)
             }
+            None => Vec::new(),
+        };
+        let drawn = self
+            .renderer
+            .render_into(view_proj, &draws, &textured, &target);
+        drop((draws, textured));
+        match drawn {
+            Ok(timing) => self.stats.drawn_triangles = timing.triangles,
+            Err(e) => self.fail(format!("drawing: {e}")),
         }
         self.renderer.queue().present(frame);
         for &s in &d.touched {
@@ -414,21 +458,7 @@ pub fn navigator(eye: Vec3, dir: Vec3) -> Navigator {
     nav
 }
 
-/// What the cache holds, as the frame decision asks it.
-struct Cached<'a>(&'a ObjectCache<Resident>, &'a Scene<'a>);
-
-impl portico_client::frame::Resident for Cached<'_> {
-    fn has(&self, id: u32) -> bool {
-        self.0.contains(id)
-    }
-
-    fn stab(&self, cell: u32) -> Option<Arc<StabList>> {
-        match self.0.get(self.1.stab_segment(cell)?) {
-            Some(Resident::Stab(l)) => Some(l.clone()),
-            _ => None,
-        }
-    }
-}
-
-/// The elision the viewer runs: cost/benefit optimisation at the frame budget (§4.2.3).
+/// The elision the viewer runs by default: cost/benefit optimisation at the frame budget
+/// (§4.2.3); `?elision=impostors` runs Maciel's cluster traversal, far clusters drawn as
+/// their textured boxes.
 pub const ELISION: Algorithm = Algorithm::Optimize;

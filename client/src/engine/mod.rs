@@ -6,6 +6,13 @@
 //!
 //! - [`pull`]: reads over `POST /v1/prefetch` and `GET /v1/batch` (Funkhouser §5.2.3, Ch. 6).
 //! - [`push`]: one `/v1/stream` session: what to send each frame, what a pushed frame is.
+//! - [`catalogue`]: what the client knows of the segments (rows, kinds, decoded sizes), and the
+//!   model it starts from, whole or paged ([`catalogue::Start`]).
+//! - [`pages`]: the paged manifest, learnt cell by cell with the stab lists.
+//! - [`reopen`]: when to try a push session again (back-off), pull reading meanwhile.
 
+pub mod catalogue;
+pub mod pages;
 pub mod pull;
 pub mod push;
+pub mod reopen;

@@ -170,6 +170,15 @@ enum Resident {
     Texture(GpuTexture),
 }
 
+impl portico_client::frame::MaybeStab for Resident {
+    fn stab_list(&self) -> Option<&Arc<StabList>> {
+        match self {
+            Resident::Stab(l) => Some(l),
+            _ => None,
+        }
+    }
+}
+
 /// The model as the client knows it.
 struct Model {
     /// Started from the core manifest: a sparse header, growing page by page.
@@ -179,6 +188,9 @@ struct Model {
     database_id: String,
     model_triangles: u64,
     catalogue: Catalogue,
+    /// Texture segments cut into parts, and the parts that came (shared with the IO thread,
+    /// which joins them).
+    parts: std::sync::Arc<std::sync::Mutex<portico_client::parts::Parts>>,
     /// `"paged"` or `"whole"`, the seconds and decoded bytes it took ([`WalkSummary::manifest`]).
     startup: (String, f64, u64),
 }

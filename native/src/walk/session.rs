@@ -4,12 +4,13 @@
 
 use super::walker::Walker;
 use super::{Model, WalkConfig, WalkSummary};
-use crate::io::{Catalogue, IoConfig, IoStage};
+use crate::io::{IoConfig, IoStage};
 use crate::net::Remote;
 use crate::pages::PageBook;
 use anyhow::{Context, Result};
 use glam::Vec3;
 use portico_client::elision::Algorithm;
+use portico_client::engine::catalogue::Start;
 use portico_client::parts::Parts;
 use portico_client::stats::FrameRow;
 use portico_client::view;
@@ -59,6 +60,7 @@ impl<'a> Session<'a> {
             remote,
             renderer.uploader(),
             model.catalogue.clone(),
+            model.parts.clone(),
             pages,
             IoConfig {
                 policy,
@@ -175,9 +177,8 @@ impl Drop for Session<'_> {
     }
 }
 
-/// Reads what the first frame needs: the core manifest (the instances and the cell graph
-/// to follow page by page with the stab lists) when `paged` and the server has it, else the
-/// whole manifest and the cell graph.
+/// The model from the core manifest when `paged` and the server has one, else from the whole
+/// manifest and the cell graph.
 fn load_model(
     remote: &Remote,
     paged: bool,
@@ -189,107 +190,31 @@ fn load_model(
     } else {
         None
     };
-    let Some(core) = core else {
-        let (m, graph) = crate::net::model_blocking(remote)?;
-        let bytes = portico_protocol::to_bincode(&m).map_or(0, |b| b.len() as u64)
-            + graph_bytes(graph.as_ref());
-        let triangles = m.header.finest_triangles();
-        let segments = m.segments;
-        let mut model = model_of(
-            remote,
-            m.header,
-            graph,
-            m.database_id,
-            triangles,
-            segments,
-            texels,
-        )?;
-        model.startup = ("whole".into(), t0.elapsed().as_secs_f64(), bytes);
-        return Ok((model, None));
-    };
-    portico_data::format::check_core(
-        &core.header,
-        core.segment_count,
-        core.instance_count,
-        core.graph.as_ref(),
-    )
-    .map_err(|e| anyhow::anyhow!("{}: {e}", remote.base()))?;
-    let bytes = portico_protocol::to_bincode(&core).map_or(0, |b| b.len() as u64);
-    // The cell graph grows page by page too: its cells and portals come with the stab lists.
-    let graph = core
-        .graph
-        .as_ref()
-        .map(portico_data::cells::CellGraph::sparse);
-    let mut rows = vec![portico_data::format::UNKNOWN_ROW; core.segment_count as usize];
-    for &(s, r) in &core.rows {
-        if let Some(slot) = rows.get_mut(s as usize) {
-            *slot = r;
+    let (start, how, bytes) = match core {
+        Some(core) => {
+            let bytes = portico_protocol::to_bincode(&core).map_or(0, |b| b.len() as u64);
+            (Start::paged(core, texels), "paged", bytes)
         }
-    }
-    let book = PageBook::new(core.header.core(), core.instance_count, core.graph);
-    let header = portico_data::format::Header::sparse(core.header, core.instance_count);
-    let mut model = model_of(
-        remote,
-        header,
-        graph,
-        core.database_id,
-        core.triangles,
-        rows,
-        texels,
-    )?;
-    model.startup = ("paged".into(), t0.elapsed().as_secs_f64(), bytes);
-    Ok((model, Some(book)))
-}
-
-fn graph_bytes(graph: Option<&portico_data::cells::CellGraph>) -> u64 {
-    graph.map_or(0, |g| portico_data::format::encode_segment(g).len() as u64)
-}
-
-fn model_of(
-    remote: &Remote,
-    header: portico_data::format::Header,
-    graph: Option<portico_data::cells::CellGraph>,
-    database_id: String,
-    model_triangles: u64,
-    segments: Vec<portico_protocol::SegmentInfo>,
-    texels: TexelFormat,
-) -> Result<Model> {
-    let bounds: Vec<_> = header.instances.iter().map(|i| i.bounds).collect();
-    // Indices from the manifest are used as they are below: check them once.
-    if let Some(h) = &header.hierarchy {
-        h.check(&bounds)
-            .map_err(|e| anyhow::anyhow!("{}: the manifest's hierarchy: {e}", remote.base()))?;
-    }
-    let stabs = header
-        .cells
-        .as_ref()
-        .map(|c| c.stab_lists().map(|(s, _)| s).collect())
-        .unwrap_or_default();
-    let textures = header
-        .hierarchy
-        .iter()
-        .flat_map(|h| &h.nodes)
-        .filter(|n| n.texture != u32::MAX)
-        .map(|n| (n.texture, (n.bounds, n.tile)))
-        .collect();
-    Ok(Model {
-        catalogue: Catalogue {
-            segments,
-            stabs,
-            textures,
-            mips: header
-                .textures
-                .iter()
-                .flat_map(|t| t.segments.iter().map(move |s| (s.segment, t.wrap)))
-                .collect(),
-            decoded: header.decoded_sizes(texels).collect(),
-            parts: Arc::new(Mutex::new(Parts::new(&header.textures))),
-        },
-        header,
-        graph,
-        bounds,
-        database_id,
-        model_triangles,
-        startup: Default::default(),
-    })
+        None => {
+            let (m, graph) = crate::net::model_blocking(remote)?;
+            let bytes = portico_protocol::to_bincode(&m).map_or(0, |b| b.len() as u64)
+                + graph
+                    .as_ref()
+                    .map_or(0, |g| portico_data::format::encode_segment(g).len() as u64);
+            (Start::whole(m, graph, texels), "whole", bytes)
+        }
+    };
+    let start = start.map_err(|e| anyhow::anyhow!("{}: {e}", remote.base()))?;
+    let parts = Arc::new(Mutex::new(Parts::new(&start.header.textures)));
+    let model = Model {
+        header: start.header,
+        graph: start.graph,
+        bounds: start.bounds,
+        database_id: start.database_id,
+        model_triangles: start.model_triangles,
+        catalogue: start.catalogue,
+        parts,
+        startup: (how.into(), t0.elapsed().as_secs_f64(), bytes),
+    };
+    Ok((model, start.pages.map(PageBook::new)))
 }

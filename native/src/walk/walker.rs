@@ -7,20 +7,16 @@ use super::{Model, Resident, WalkConfig, WalkSummary};
 use crate::drive::{Ask, Event};
 use crate::io::{IoStage, Payload};
 use anyhow::{Context, Result};
-use glam::{Mat4, Vec3};
+use glam::Vec3;
 use portico_client::cache::ObjectCache;
-use portico_client::cluster::Stand;
 use portico_client::cost::{CostModel, OnlineCost};
 use portico_client::demand::lacking;
-use portico_client::frame::{Decider, Scene};
+use portico_client::engine::catalogue::Start;
+use portico_client::frame::{Cached, Decider, Scene};
 use portico_client::stats::{FrameRow, Series, write_csv};
 use portico_client::view::{self, Viewpoint};
-use portico_data::cells::StabList;
-use portico_data::geometry::encode_geometry;
-use portico_data::hierarchy::{Hierarchy, colour_box};
 use portico_protocol::Observer;
-use portico_render::{Draw, GpuImpostor, GpuMesh, Renderer};
-use std::sync::Arc;
+use portico_render::{Draw, Renderer, StandIns};
 
 /// The frame loop's state.
 pub(super) struct Walker<'a> {
@@ -31,7 +27,7 @@ pub(super) struct Walker<'a> {
     cost: CostModel,
     pub(super) online: OnlineCost,
     consumed: u64,
-    colour_boxes: std::collections::HashMap<u32, GpuMesh>,
+    stand_ins: StandIns,
     /// Segments larger than the whole cache: reported as held so no answer lists them again.
     too_big: std::collections::HashSet<u32>,
     /// What the last frame lacked ([`portico_client::demand::lacking`]), for the IO stage.
@@ -68,7 +64,7 @@ impl<'a> Walker<'a> {
             cost,
             online: OnlineCost::default(),
             consumed: 0,
-            colour_boxes: std::collections::HashMap::new(),
+            stand_ins: StandIns::default(),
             too_big: std::collections::HashSet::new(),
             lacking: Vec::new(),
             incomplete: false,
@@ -114,13 +110,8 @@ impl<'a> Walker<'a> {
                             // The instances its cell's page brought (paged manifest): known
                             // from this frame on.
                             if let Some(p) = page {
-                                for i in self.model.header.take_page(&p) {
-                                    self.model.bounds[i as usize] =
-                                        self.model.header.instances[i as usize].bounds;
-                                }
-                                if let Some(g) = &mut self.model.graph {
-                                    g.take_part(&p.graph);
-                                }
+                                let m = &mut self.model;
+                                Start::learn(&mut m.header, m.graph.as_mut(), &mut m.bounds, &p);
                             }
                             (Resident::Stab(s), bytes)
                         }
@@ -237,7 +228,7 @@ impl<'a> Walker<'a> {
         self.incomplete = d.frame.objects_skipped > 0;
 
         if let Some(h) = &self.model.header.hierarchy {
-            make_colour_boxes(&mut self.colour_boxes, h, &d.boxes, r);
+            self.stand_ins.update(h, &d.boxes, r);
         }
         let header = &self.model.header;
         let cache = &self.cache;
@@ -251,7 +242,13 @@ impl<'a> Walker<'a> {
             }
         }
         let textured = match &header.hierarchy {
-            Some(h) => stand_ins(cache, &self.colour_boxes, h, &d.boxes, &mut draws),
+            Some(h) => {
+                let impostor = |s| match cache.get(s) {
+                    Some(Resident::Impostor(i)) => Some(i),
+                    _ => None,
+                };
+                self.stand_ins.draws(h, &d.boxes, impostor, &mut draws)
+            }
             None => Vec::new(),
         };
         let timing = match target {
@@ -277,11 +274,7 @@ impl<'a> Walker<'a> {
     }
 
     fn parts(&self) -> std::sync::MutexGuard<'_, portico_client::parts::Parts> {
-        self.model
-            .catalogue
-            .parts
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
+        self.model.parts.lock().unwrap_or_else(|e| e.into_inner())
     }
 
     pub(super) fn publish(&self, io: &IoStage, observer: Observer) {
@@ -381,65 +374,4 @@ fn first_complete(rows: &[FrameRow]) -> Option<super::FirstComplete> {
             bytes,
         })
     })
-}
-
-/// What the walker's cache holds, as the frame decision asks it.
-struct Cached<'a>(&'a ObjectCache<Resident>, &'a Scene<'a>);
-
-impl portico_client::frame::Resident for Cached<'_> {
-    fn has(&self, id: u32) -> bool {
-        self.0.contains(id)
-    }
-
-    fn stab(&self, cell: u32) -> Option<Arc<StabList>> {
-        match self.0.get(self.1.stab_segment(cell)?) {
-            Some(Resident::Stab(l)) => Some(l.clone()),
-            _ => None,
-        }
-    }
-}
-
-/// Makes the average-colour boxes of `boxes` that do not exist yet (their colours are in the
-/// header: nothing to fetch) and frees the others, so they never add up outside the cache.
-fn make_colour_boxes(
-    made: &mut std::collections::HashMap<u32, GpuMesh>,
-    h: &Hierarchy,
-    boxes: &[(u32, Stand)],
-    r: &Renderer,
-) {
-    let wanted: std::collections::HashSet<u32> = boxes.iter().map(|b| b.0).collect();
-    made.retain(|n, _| wanted.contains(n));
-    for &(n, _) in boxes {
-        if let std::collections::hash_map::Entry::Vacant(e) = made.entry(n) {
-            let node = &h.nodes[n as usize];
-            let mesh = encode_geometry(&colour_box(&node.bounds, &node.face_colors));
-            if let Ok(gpu) = r.upload(&mesh) {
-                e.insert(gpu);
-            }
-        }
-    }
-}
-
-/// Adds the average-colour boxes to `draws` and returns the resident textured boxes; the
-/// textures used count as touched (§5.2.3).
-fn stand_ins<'c>(
-    cache: &'c ObjectCache<Resident>,
-    colour: &'c std::collections::HashMap<u32, GpuMesh>,
-    h: &Hierarchy,
-    boxes: &[(u32, Stand)],
-    draws: &mut Vec<Draw<'c>>,
-) -> Vec<&'c GpuImpostor> {
-    let mut textured = Vec::new();
-    for &(n, stand) in boxes {
-        let t = h.nodes[n as usize].texture;
-        match (stand, cache.get(t)) {
-            (Stand::Textured, Some(Resident::Impostor(i))) => textured.push(i),
-            _ => {
-                if let Some(mesh) = colour.get(&n) {
-                    draws.push(Draw::new(mesh, Mat4::IDENTITY, [1.0; 4]));
-                }
-            }
-        }
-    }
-    textured
 }

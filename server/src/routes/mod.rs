@@ -15,6 +15,7 @@ mod metrics;
 mod page;
 mod prefetch;
 mod segment;
+mod tour;
 
 pub(crate) use batch::{batch, batch_in};
 pub(crate) use cells::cells;
@@ -25,6 +26,7 @@ pub(crate) use metrics::metrics;
 pub(crate) use page::page;
 pub(crate) use prefetch::{prefetch, prefetch_in};
 pub(crate) use segment::{segment, segment_in};
+pub(crate) use tour::{tour, tour_in};
 
 use crate::error::Error;
 use crate::state::AppState;
@@ -37,6 +39,6 @@ type Shared = State<Arc<AppState>>;
 /// Any other path.
 pub async fn fallback() -> Error {
     Error::not_found(
-        "no such endpoint; see / (the browser viewer), /healthz, /metrics, /v1/manifest, /v1/cells, /v1/db/{database_id}/segments/{id}, /v1/db/{database_id}/batch, /v1/db/{database_id}/prefetch, /v1/segments/{id}, /v1/batch, /v1/prefetch, /v1/stream",
+        "no such endpoint; see / (the browser viewer), /healthz, /metrics, /v1/manifest, /v1/cells, /v1/db/{database_id}/segments/{id}, /v1/db/{database_id}/batch, /v1/db/{database_id}/prefetch, /v1/db/{database_id}/pages/{cell}, /v1/db/{database_id}/tour, /v1/tour, /v1/segments/{id}, /v1/batch, /v1/prefetch, /v1/stream",
     )
 }

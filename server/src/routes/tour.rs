@@ -1,0 +1,73 @@
+//! `GET /v1/db/{database_id}/tour`: the model's standard tour (Funkhouser §7's recorded path
+//! stand-in: through the doors from room to room at eye height, `portico_data::path`), so that
+//! a client that starts from the core manifest, without the whole cell graph, can walk it.
+
+use super::Shared;
+use crate::error::Error;
+use crate::respond::{IMMUTABLE, REVALIDATE, built, current};
+use axum::body::{Body, Bytes};
+use axum::extract::{Path, State};
+use axum::http::header;
+use axum::response::Response;
+use portico_data::path::{PathKind, standard};
+use portico_data::person::{TURN_DEGREES, WALK_SPEED};
+
+/// Legs of the tour (rooms visited).
+pub const LEGS: usize = 6;
+
+/// `GET /v1/db/{database_id}/tour`: the standard tour as JSON (`portico_data::path::CameraPath`),
+/// made once on a compute slot; immutable (the URL names the database). 404 for a model with
+/// no tour (nothing to walk through).
+pub async fn tour_in(State(s): Shared, Path(db): Path<String>) -> Result<Response, Error> {
+    current(&s, &db)?;
+    answer(s, IMMUTABLE).await
+}
+
+/// `GET /v1/tour`: the same under a URL a rebuild reuses (revalidated), for a client that asks
+/// for it before it knows the database (beside the core manifest).
+pub async fn tour(State(s): Shared) -> Result<Response, Error> {
+    answer(s, REVALIDATE).await
+}
+
+async fn answer(
+    s: std::sync::Arc<crate::state::AppState>,
+    cache: &'static str,
+) -> Result<Response, Error> {
+    let state = s.clone();
+    let made = s
+        .compute
+        .run(move |_| {
+            let tour = state.tour.get_or_init(|| {
+                let db = state.db();
+                let h = db.header();
+                let bounds: Vec<_> = h.instances.iter().map(|i| i.bounds).collect();
+                let graph = state.prefetcher.graph();
+                let turn = TURN_DEGREES.to_radians();
+                let path = standard(
+                    graph,
+                    &h.bounds,
+                    &bounds,
+                    PathKind::Tour,
+                    LEGS,
+                    1,
+                    WALK_SPEED,
+                    turn,
+                );
+                path.and_then(|p| serde_json::to_vec(&p).ok())
+                    .map(Bytes::from)
+            });
+            Ok(tour.clone())
+        })
+        .await?;
+    let Some(json) = made else {
+        return Err(Error::not_found(
+            "this model has no tour (nothing to walk through)",
+        ));
+    };
+    built(
+        Response::builder()
+            .header(header::CONTENT_TYPE, portico_protocol::JSON_MIME)
+            .header(header::CACHE_CONTROL, cache)
+            .body(Body::from(json)),
+    )
+}
