@@ -8,7 +8,8 @@ Against a running `portico serve MODEL` that serves the viewer (`bash web/build.
 starts chromedriver, opens the page (with Chromium's own network emulation when `--link` is
 given: latency added to every request, download and upload throttled), and prints as JSON:
 the time from the start of page load to the first complete frame (every visible object drawn),
-the bytes received until then, and the mean frame interval while the standard tour plays for
+the segment bytes received until then and everything fetched over HTTP until then (the page,
+the bundle, the manifest or the core and its pages), and the mean frame interval while the standard tour plays for
 `--seconds`. Only the standard library: it speaks WebDriver's JSON over HTTP itself.
 """
 
@@ -114,6 +115,11 @@ def main():
                 break
             time.sleep(0.1)
         first = dict(stats or {})
+        # Everything fetched over HTTP until then (the page, the bundle, the manifest or the core
+        # and pages, the tour; pulled segments too), as Chromium counts it on the wire.
+        http_bytes = run("return performance.getEntriesByType('navigation')"
+                         ".concat(performance.getEntriesByType('resource'))"
+                         ".reduce((s, e) => s + (e.transferSize || 0), 0)")
         run("window.portico.tour(true)")
         samples = []
         t1 = time.time()
@@ -131,6 +137,8 @@ def main():
             "first_complete_ms": first.get("first_complete_ms"),
             "first_complete_frame": first.get("first_complete_frame"),
             "bytes_at_first_complete": first.get("bytes_received"),
+            "http_bytes_at_first_complete": http_bytes,
+            "manifest": first.get("manifest", "whole"),
             "tour_seconds": a.seconds,
             "tour_frames": last.get("frames", 0) - frames0,
             "mean_frame_ms": (elapsed * 1e3 / max(1, last.get("frames", 0) - frames0)),

@@ -209,7 +209,7 @@ pub(crate) async fn drive_after<F: Fetcher>(
                 let Some(ask) = state.borrow_and_update().clone() else { continue };
                 match ask.wants {
                     Some(wants) => pull.want(wants, ask.consumed, ask.at),
-                    None => pull.frame(ask.frame_state(), Instant::now()),
+                    None => pull.frame(ask.frame_state(), ask.at, Instant::now()),
                 }
                 continue;
             }

@@ -102,6 +102,9 @@ impl Fetcher for Http {
                 .iter()
                 .filter_map(|&s| book.claim(s).map(|c| (s, c)))
                 .collect();
+            // A task aborted mid-way (push took over) releases what it claimed, or those
+            // pages would count as on their way for ever.
+            let _claims = Claims(book.clone(), cells.iter().map(|&(_, c)| c).collect());
             let pages = futures_util::future::join_all(
                 cells
                     .iter()
@@ -154,6 +157,7 @@ impl Fetcher for Http {
             // A pushed stab list whose page did not come first (the server could not make it,
             // or it was refused here) has its page read over HTTP.
             if let Some(cell) = book.claim(id) {
+                let _claim = Claims(book.clone(), vec![cell]);
                 me.fetch_page(&book, id, cell).await.map_err(|(_, e)| e)?;
             }
             let deadline = tokio::time::Instant::now() + crate::pages::ROW_WAIT;
@@ -171,6 +175,18 @@ impl Fetcher for Http {
 
     fn held_bytes(&self, id: u32) -> u64 {
         self.catalogue().held(id)
+    }
+}
+
+/// Cells whose pages a read task claimed: released when the task ends however it ends (a
+/// page taken is no longer asked for, so releasing it changes nothing).
+struct Claims(Arc<PageBook>, Vec<u32>);
+
+impl Drop for Claims {
+    fn drop(&mut self) {
+        for &c in &self.1 {
+            self.0.release(c);
+        }
     }
 }
 

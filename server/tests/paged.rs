@@ -225,6 +225,14 @@ async fn the_standard_tour_is_served_under_the_database() {
     assert_eq!(r.status(), 410, "another database's tour");
     let r = get(&http, &format!("{}/v1/tour", s.base)).await;
     assert_eq!(r.headers()["cache-control"], "no-cache");
+    let tag = r.headers()["etag"].clone();
+    let again = http
+        .get(format!("{}/v1/tour", s.base))
+        .header("if-none-match", tag)
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(again.status(), 304, "revalidated, not sent again");
     assert_eq!(
         r.json::<portico_data::path::CameraPath>().await.unwrap(),
         want

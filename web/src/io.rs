@@ -28,7 +28,7 @@ use std::collections::{HashMap, VecDeque};
 use std::rc::Rc;
 use web_time::Instant;
 
-pub use portico_client::engine::reopen::OPEN_WAIT;
+pub use portico_client::engine::reopen::{OPEN_TIMEOUT, OPEN_WAIT};
 /// Most pushed bytes taken into the cache in one frame: the rest waits for the next frames, so
 /// a burst of pushes never makes one long frame.
 pub const PUSHED_PER_FRAME: u64 = 4 << 20;
@@ -320,7 +320,11 @@ impl Io {
                 }
                 true
             }
-            Some(s) if s.push.is_none() && now.duration_since(s.since) < OPEN_WAIT => true,
+            // Opening. The page's first session: pull waits a moment for it (a cold start would
+            // read everything twice otherwise); a later one opens while pull reads on.
+            Some(s) if s.push.is_none() && now.duration_since(s.since) < OPEN_TIMEOUT => {
+                self.sessions == 1 && now.duration_since(s.since) < OPEN_WAIT
+            }
             // Not open in time: pull, and try another session later.
             Some(_) => {
                 self.stream = None;
@@ -347,8 +351,9 @@ impl Io {
         Some(match event {
             pull::Event::Answer(resp) => Arrival::Release(resp.evict),
             pull::Event::Segment { id, listed_at, .. } => {
+                let bytes = bodies.remove(&id)?;
                 let page = self.pages.as_ref().and_then(|p| p.borrow_mut().handed(id));
-                Arrival::Segment(id, bodies.remove(&id)?, listed_at, page)
+                Arrival::Segment(id, bytes, listed_at, page)
             }
             pull::Event::Failed(why) => Arrival::Failed(why),
             pull::Event::Stale(why) => {
@@ -385,7 +390,7 @@ impl Io {
             return;
         }
         state.consumed = self.pull.events();
-        self.pull.frame(state, now);
+        self.pull.frame(state, now, now);
         let catalogue = self.catalogue.clone();
         let wire = |id: u32| catalogue.borrow().wire(id);
         let held = |id: u32| catalogue.borrow().held(id);

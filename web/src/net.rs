@@ -82,9 +82,9 @@ impl Remote {
     }
 
     async fn send(&self, url: &str, body: Option<&[u8]>, what: &str) -> Result<Vec<u8>> {
-        self.send_found(url, body, what)
+        self.fetch(url, body, what, false)
             .await?
-            .ok_or_else(|| anyhow!("{url}: {what}: 404 not found"))
+            .ok_or_else(|| anyhow!("{url}: {what}: not found"))
     }
 
     /// [`Remote::send`], with `Ok(None)` for `404 Not Found`.
@@ -93,6 +93,18 @@ impl Remote {
         url: &str,
         body: Option<&[u8]>,
         what: &str,
+    ) -> Result<Option<Vec<u8>>> {
+        self.fetch(url, body, what, true).await
+    }
+
+    /// The request; with `missing_ok`, `Ok(None)` for `404 Not Found` (else its error, with the
+    /// server's message).
+    async fn fetch(
+        &self,
+        url: &str,
+        body: Option<&[u8]>,
+        what: &str,
+        missing_ok: bool,
     ) -> Result<Option<Vec<u8>>> {
         let init = RequestInit::new();
         // A request the network never answers must not hold its slot forever.
@@ -130,7 +142,7 @@ impl Remote {
             .await
             .map_err(|e| anyhow!("{url}: reading {what}: {}", js_error(&e)))?;
         let bytes = Uint8Array::new(&buffer).to_vec();
-        if resp.status() == 404 {
+        if missing_ok && resp.status() == 404 {
             return Ok(None);
         }
         if !resp.ok() {

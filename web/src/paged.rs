@@ -55,13 +55,15 @@ impl Read {
                 }
             }
         }
+        // One deadline for the whole request, as the native IO thread has.
+        let until = Instant::now() + ROW_WAIT;
         let mut out = Vec::new();
         for (id, item) in got? {
             let item = match (failed.remove(&id), item) {
                 (Some(e), _) => Err(e),
                 (None, Err(e)) => Err(format!("{e:#}")),
                 (None, Ok(bytes)) => {
-                    self.ready(id).await;
+                    self.ready(id, until).await;
                     let checked = self.catalogue.borrow().verify(id, &bytes);
                     checked.map(|()| bytes)
                 }
@@ -71,10 +73,9 @@ impl Read {
         Ok(out)
     }
 
-    /// Waits while pages on their way may bring segment `id`'s row, [`ROW_WAIT`] at most.
-    async fn ready(&self, id: u32) {
+    /// Waits while pages on their way may bring segment `id`'s row, until `until` at most.
+    async fn ready(&self, id: u32, until: Instant) {
         let Some(pages) = &self.pages else { return };
-        let until = Instant::now() + ROW_WAIT;
         while pages.borrow().readiness(&self.catalogue.borrow(), id) == Readiness::Waiting
             && Instant::now() < until
         {

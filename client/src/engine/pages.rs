@@ -7,7 +7,9 @@
 //!
 //! A stab list is never handed on before its cell's page was taken (it would name instances the
 //! frame loop cannot place), and a segment whose row no page has brought waits while pages are
-//! on their way ([`Readiness::Waiting`]), then fails and is asked for (or pushed) again.
+//! on their way ([`Readiness::Waiting`]), then fails and is asked for again (pull); a pushed one
+//! is given back at once in a page (the server pushes pages before the stab lists that need
+//! them) and after the same wait natively.
 
 use super::catalogue::Catalogue;
 use portico_data::cells::paged::GraphCore;

@@ -154,13 +154,14 @@ impl Pull {
         self.reads.len() + usize::from(self.asking)
     }
 
-    /// A frame at `now`: what the frame loop took frees the window, what it lacked goes to the
-    /// top of the read list, and the next prefetch request asks about its observer.
-    pub fn frame(&mut self, f: FrameState, now: Instant) {
+    /// A frame published at `at`, heard at `now`: what the frame loop took frees the window,
+    /// what it lacked goes to the top of the read list (listed from `at`), and the next
+    /// prefetch request asks about its observer.
+    pub fn frame(&mut self, f: FrameState, at: Instant, now: Instant) {
         self.schedule.acknowledge(f.consumed, true);
         self.plan.frame(f.lacking, f.incomplete);
         // Every frame: deadlines come nearer as the answer ages.
-        self.refresh(now, now);
+        self.refresh(now, at);
         self.unasked = Some((f.observer, f.held));
     }
 

@@ -1,5 +1,5 @@
-//! The HTTP handlers: health, metrics, manifest, cells, segments (single, ranged, batched) and
-//! prefetch. Segment bytes go out as `Bytes` slices of the memory map: no copy. Segment URLs
+//! The HTTP handlers: health, metrics, the manifest (whole, or its core and each cell's page),
+//! the cell graph, segments (single, ranged, batched), the standard tour and prefetch. Segment bytes go out as `Bytes` slices of the memory map: no copy. Segment URLs
 //! name the database they come from (`/v1/db/{database_id}/…`), so they are immutable and no
 //! cache anywhere can serve stale bytes after a rebuild.
 

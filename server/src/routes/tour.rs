@@ -3,12 +3,13 @@
 //! a client that starts from the core manifest, without the whole cell graph, can walk it.
 
 use super::Shared;
+use crate::conditional::not_modified;
 use crate::error::Error;
-use crate::respond::{IMMUTABLE, REVALIDATE, built, current};
+use crate::respond::{IMMUTABLE, REVALIDATE, built, current, revalidated};
 use axum::body::{Body, Bytes};
 use axum::extract::{Path, State};
-use axum::http::header;
-use axum::response::Response;
+use axum::http::{HeaderMap, StatusCode, header};
+use axum::response::{IntoResponse, Response};
 use portico_data::path::{PathKind, standard};
 use portico_data::person::{TURN_DEGREES, WALK_SPEED};
 
@@ -20,19 +21,25 @@ pub const LEGS: usize = 6;
 /// no tour (nothing to walk through).
 pub async fn tour_in(State(s): Shared, Path(db): Path<String>) -> Result<Response, Error> {
     current(&s, &db)?;
-    answer(s, IMMUTABLE).await
+    answer(s, IMMUTABLE, &HeaderMap::new()).await
 }
 
 /// `GET /v1/tour`: the same under a URL a rebuild reuses (revalidated), for a client that asks
 /// for it before it knows the database (beside the core manifest).
-pub async fn tour(State(s): Shared) -> Result<Response, Error> {
-    answer(s, REVALIDATE).await
+/// Revalidated with the database's ETag (`"t-{database_id}"`, 304 when it matches).
+pub async fn tour(State(s): Shared, headers: HeaderMap) -> Result<Response, Error> {
+    answer(s, REVALIDATE, &headers).await
 }
 
 async fn answer(
     s: std::sync::Arc<crate::state::AppState>,
     cache: &'static str,
+    headers: &HeaderMap,
 ) -> Result<Response, Error> {
+    let tag = format!("\"t-{}\"", s.database_id);
+    if not_modified(headers, &tag) {
+        return Ok(revalidated(StatusCode::NOT_MODIFIED.into_response(), &tag));
+    }
     let state = s.clone();
     let made = s
         .compute
@@ -68,6 +75,7 @@ async fn answer(
         Response::builder()
             .header(header::CONTENT_TYPE, portico_protocol::JSON_MIME)
             .header(header::CACHE_CONTROL, cache)
+            .header(header::ETAG, tag)
             .body(Body::from(json)),
     )
 }

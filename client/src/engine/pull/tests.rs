@@ -99,7 +99,7 @@ fn ms(t: Instant, ms: u64) -> Instant {
 fn a_cold_start_reads_what_the_frame_lacks_before_the_answer_comes() {
     let t0 = Instant::now();
     let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
-    pull.frame(frame(vec![7, 8, 9], 0), t0);
+    pull.frame(frame(vec![7, 8, 9], 0), t0, t0);
     let cmds = drain(&mut pull, t0);
     assert_eq!(asks(&cmds), vec![1]);
     assert_eq!(reads(&cmds), vec![(1, vec![7, 8, 9])]);
@@ -116,7 +116,7 @@ fn a_cold_start_reads_what_the_frame_lacks_before_the_answer_comes() {
 fn what_the_frame_lacks_goes_ahead_of_the_answer_and_is_not_read_twice() {
     let t0 = Instant::now();
     let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
-    pull.frame(frame(vec![8], 0), t0);
+    pull.frame(frame(vec![8], 0), t0, t0);
     let first = drain(&mut pull, t0);
     assert_eq!(reads(&first), vec![(1, vec![8])]);
     pull.answered(1, t0, Ok(answer(&[100, 8, 101], &[])), ms(t0, 1));
@@ -136,6 +136,7 @@ fn read_ahead_waits_while_the_view_has_objects_with_nothing_to_draw() {
             ..frame(vec![7], 0)
         },
         t0,
+        t0,
     );
     let cmds = drain(&mut pull, t0);
     pull.answered(1, t0, Ok(answer(&[100, 101], &[])), ms(t0, 1));
@@ -147,7 +148,7 @@ fn read_ahead_waits_while_the_view_has_objects_with_nothing_to_draw() {
 fn what_a_later_answer_can_bring_in_time_is_not_read_yet() {
     let t0 = Instant::now();
     let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
-    pull.frame(frame(vec![], 0), t0);
+    pull.frame(frame(vec![], 0), t0, t0);
     drain(&mut pull, t0);
     pull.answered(1, t0, Ok(answer(&[100], &[200, 201])), ms(t0, 1));
     assert_eq!(reads(&drain(&mut pull, ms(t0, 1))), vec![(1, vec![100])]);
@@ -157,14 +158,15 @@ fn what_a_later_answer_can_bring_in_time_is_not_read_yet() {
 fn one_prefetch_request_at_a_time_with_the_latest_observer() {
     let t0 = Instant::now();
     let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
-    pull.frame(frame(vec![], 0), t0);
+    pull.frame(frame(vec![], 0), t0, t0);
     assert_eq!(asks(&drain(&mut pull, t0)), vec![1]);
     for (i, x) in [1.0, 2.0, 3.0].into_iter().enumerate() {
         let f = FrameState {
             observer: observer(x),
             ..frame(vec![], 0)
         };
-        pull.frame(f, ms(t0, 16 * (i as u64 + 1)));
+        let at = ms(t0, 16 * (i as u64 + 1));
+        pull.frame(f, at, at);
         assert!(drain(&mut pull, ms(t0, 16 * (i as u64 + 1))).is_empty());
     }
     pull.answered(1, t0, Ok(answer(&[], &[])), ms(t0, 60));
@@ -183,7 +185,7 @@ fn the_held_set_sent_names_what_is_on_its_way() {
         held: vec![1, 2],
         ..frame(vec![5], 0)
     };
-    pull.frame(f, t0);
+    pull.frame(f, t0, t0);
     let cmds = drain(&mut pull, t0);
     // The ask was sent before the read of 5: it names what the cache holds.
     let Command::Ask(_, req) = &cmds[0] else {
@@ -191,7 +193,7 @@ fn the_held_set_sent_names_what_is_on_its_way() {
     };
     assert_eq!(portico_protocol::decode_held(&req.held), Some(vec![1, 2]));
     pull.answered(1, t0, Ok(answer(&[], &[])), ms(t0, 1));
-    pull.frame(frame(vec![], 0), ms(t0, 2));
+    pull.frame(frame(vec![], 0), ms(t0, 2), ms(t0, 2));
     let cmds = drain(&mut pull, ms(t0, 2));
     let Command::Ask(_, req) = &cmds[0] else {
         panic!("{cmds:?}")
@@ -207,11 +209,11 @@ fn the_held_set_sent_names_what_is_on_its_way() {
 fn a_failed_prefetch_request_waits_before_the_next() {
     let t0 = Instant::now();
     let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
-    pull.frame(frame(vec![], 0), t0);
+    pull.frame(frame(vec![], 0), t0, t0);
     drain(&mut pull, t0);
     let e = pull.answered(1, t0, Err(Fault::Failed("refused".into())), ms(t0, 10));
     assert_eq!(e, Event::Failed("refused".into()));
-    pull.frame(frame(vec![], 1), ms(t0, 20));
+    pull.frame(frame(vec![], 1), ms(t0, 20), ms(t0, 20));
     assert!(
         asks(&drain(&mut pull, ms(t0, 20))).is_empty(),
         "backing off"
@@ -223,13 +225,13 @@ fn a_failed_prefetch_request_waits_before_the_next() {
 fn a_410_stops_pull() {
     let t0 = Instant::now();
     let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
-    pull.frame(frame(vec![3], 0), t0);
+    pull.frame(frame(vec![3], 0), t0, t0);
     let cmds = drain(&mut pull, t0);
     let stale = Fault::Stale("410 Gone".into());
     let events = pull.read(reads(&cmds)[0].0, ms(t0, 5), Err(stale));
     assert_eq!(events, vec![Event::Stale("410 Gone".into())]);
     assert!(pull.stopped());
-    pull.frame(frame(vec![4], 1), ms(t0, 10));
+    pull.frame(frame(vec![4], 1), ms(t0, 10), ms(t0, 10));
     assert!(drain(&mut pull, ms(t0, 10)).is_empty());
 }
 
@@ -237,7 +239,7 @@ fn a_410_stops_pull() {
 fn a_damaged_segment_fails_alone_and_is_read_again_after_a_rest() {
     let t0 = Instant::now();
     let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
-    pull.frame(frame(vec![3, 4], 0), t0);
+    pull.frame(frame(vec![3, 4], 0), t0, t0);
     let cmds = drain(&mut pull, t0);
     let events = pull.read(
         reads(&cmds)[0].0,
@@ -246,11 +248,11 @@ fn a_damaged_segment_fails_alone_and_is_read_again_after_a_rest() {
     );
     assert_eq!(events[0], Event::Failed("segment 3: corrupt".into()));
     assert!(matches!(events[1], Event::Segment { id: 4, .. }));
-    pull.frame(frame(vec![3], 2), ms(t0, 6));
+    pull.frame(frame(vec![3], 2), ms(t0, 6), ms(t0, 6));
     assert!(reads(&drain(&mut pull, ms(t0, 6))).is_empty(), "resting");
     let later = ms(t0, 5) + crate::schedule::RETRY_AFTER;
     pull.answered(1, t0, Ok(answer(&[], &[])), later);
-    pull.frame(frame(vec![3], 2), later);
+    pull.frame(frame(vec![3], 2), later, later);
     assert_eq!(reads(&drain(&mut pull, later))[0].1, vec![3]);
 }
 
@@ -258,12 +260,12 @@ fn a_damaged_segment_fails_alone_and_is_read_again_after_a_rest() {
 fn a_segment_missing_from_a_batch_is_asked_again() {
     let t0 = Instant::now();
     let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
-    pull.frame(frame(vec![3, 4], 0), t0);
+    pull.frame(frame(vec![3, 4], 0), t0, t0);
     let cmds = drain(&mut pull, t0);
     let events = pull.read(reads(&cmds)[0].0, ms(t0, 5), Ok(vec![(4, Ok(SEG))]));
     assert_eq!(events.len(), 1);
     let later = ms(t0, 5) + crate::schedule::RETRY_AFTER;
-    pull.frame(frame(vec![3, 4], 1), later);
+    pull.frame(frame(vec![3, 4], 1), later, later);
     assert_eq!(reads(&drain(&mut pull, later))[0].1, vec![3]);
 }
 
@@ -272,7 +274,7 @@ fn the_window_bounds_what_is_delivered_and_not_taken() {
     let t0 = Instant::now();
     // Room for two segments; each read request carries what fits.
     let mut pull = Pull::new(Policy::default(), 8, 2 * SEG);
-    pull.frame(frame((1..=6).collect(), 0), t0);
+    pull.frame(frame((1..=6).collect(), 0), t0, t0);
     let cmds = drain(&mut pull, t0);
     assert_eq!(reads(&cmds), vec![(1, vec![1, 2])]);
     let events = deliver(&mut pull, &cmds, ms(t0, 5));
@@ -281,7 +283,7 @@ fn the_window_bounds_what_is_delivered_and_not_taken() {
     assert!(reads(&drain(&mut pull, ms(t0, 6))).is_empty());
     // The frame loop took both (events 1 and 2).
     pull.answered(1, t0, Ok(answer(&[], &[])), ms(t0, 7));
-    pull.frame(frame((3..=6).collect(), 3), ms(t0, 8));
+    pull.frame(frame((3..=6).collect(), 3), ms(t0, 8), ms(t0, 8));
     assert_eq!(reads(&drain(&mut pull, ms(t0, 8)))[0].1, vec![3, 4]);
 }
 
@@ -290,7 +292,7 @@ fn no_more_than_parallel_reads_are_in_flight() {
     let t0 = Instant::now();
     let mut pull = Pull::new(Policy::default(), 2, 1 << 30);
     // 100 small segments: seven read requests' worth, but two at a time.
-    pull.frame(frame((1..=100).collect(), 0), t0);
+    pull.frame(frame((1..=100).collect(), 0), t0, t0);
     let cmds = drain(&mut pull, t0);
     assert_eq!(reads(&cmds).len(), 2, "{cmds:?}");
     assert_eq!(pull.in_flight(), 3, "two reads and the prefetch request");
@@ -311,12 +313,12 @@ fn no_more_than_parallel_reads_are_in_flight() {
 fn events_are_numbered_from_where_another_transport_left_off() {
     let t0 = Instant::now();
     let mut pull = Pull::new(Policy::default(), 8, 3 * SEG).resume(10);
-    pull.frame(frame(vec![1, 2, 3], 10), t0);
+    pull.frame(frame(vec![1, 2, 3], 10), t0, t0);
     let cmds = drain(&mut pull, t0);
     deliver(&mut pull, &cmds, ms(t0, 5));
     assert_eq!(pull.events(), 13);
     // Taken up to event 12 only: segment 3 still holds its place in the window.
-    pull.frame(frame(vec![4, 5, 6], 12), ms(t0, 6));
+    pull.frame(frame(vec![4, 5, 6], 12), ms(t0, 6), ms(t0, 6));
     assert_eq!(reads(&drain(&mut pull, ms(t0, 6)))[0].1, vec![4, 5]);
 }
 
@@ -333,7 +335,7 @@ fn the_clients_own_list_asks_the_server_nothing() {
 fn handing_over_to_push_forgets_the_list_but_not_what_is_in_flight() {
     let t0 = Instant::now();
     let mut pull = Pull::new(Policy::default(), 1, 1 << 30);
-    pull.frame(frame(vec![1], 0), t0);
+    pull.frame(frame(vec![1], 0), t0, t0);
     let cmds = drain(&mut pull, t0);
     pull.answered(1, t0, Ok(answer(&[2, 3], &[])), ms(t0, 1));
     pull.clear(ms(t0, 2));
