@@ -293,6 +293,7 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
         .await;
         assert_eq!(s["backend"], "Gl", "WebGL2 was asked for: {s}");
         assert_eq!(s["transport"], "stream", "segments are pushed by default: {s}");
+        assert_eq!(s["manifest"], "paged", "the core manifest first, then pages: {s}");
         assert_eq!(s["answers"], 0, "nothing was pulled while the stream worked: {s}");
         let before = s["eye"].clone();
         let frames = s["frames"].as_u64().unwrap();
@@ -416,6 +417,24 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
         assert_eq!(s["transport"], "pull", "{s}");
         assert_eq!(s["stream_sessions"], 0, "{s}");
         assert!(s["answers"].as_u64() > Some(0), "{s}");
+        assert_eq!(s["manifest"], "paged", "pages come beside the stab lists pulled: {s}");
+
+        // Maciel's cluster traversal, as the native walk's `--elision impostors` runs it, and
+        // the whole manifest read first, as asked.
+        c.goto(&format!(
+            "http://{addr}/?backend=webgl&elision=impostors&manifest=whole"
+        ))
+        .await
+        .unwrap();
+        let s = wait_for(&c, 90, "a complete frame, impostors", |s| {
+            s["first_complete_frame"].is_u64() && s["segments_received"].as_u64() > Some(3)
+        })
+        .await;
+        assert_eq!(s["elision"], "impostors", "{s}");
+        assert_eq!(s["manifest"], "whole", "{s}");
+        assert_eq!(s["unusable_segments"], 0, "{s}");
+        let errors = eval(&c, "return window.porticoErrors || []").await;
+        assert_eq!(errors, json!([]), "the page logged errors");
         drop(stop);
         server.join().unwrap();
 

@@ -7,8 +7,9 @@ use crate::io::Io;
 use crate::net::{Remote, js_error};
 use crate::viewer::{Model, Stats, Viewer, navigator};
 use glam::Vec3;
-use portico_client::cache::{ObjectCache, split_budget};
+use portico_client::cache::split_budget;
 use portico_client::engine::catalogue::Start;
+use portico_client::engine::holdings::Holdings;
 use portico_client::frame::Decider;
 use portico_data::cells::CellGraph;
 use portico_data::cells::paged::GraphCore;
@@ -228,7 +229,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         renderer,
         surface,
         config,
-        cache: ObjectCache::new(cache_bytes),
+        held: Holdings::new(cache_bytes),
         decider: Decider::new(elision, budget_ms / 1e3, Some(policy.size_threshold_px)),
         cost: Default::default(),
         stand_ins: Default::default(),
@@ -242,8 +243,6 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         ),
         nav: navigator(eye, dir),
         touring: None,
-        too_big: Default::default(),
-        lacking: Vec::new(),
         drawn: Vec::new(),
         stats: Stats {
             cache_budget: cache_bytes,
@@ -251,6 +250,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
             backend: backend_name,
             texel_format: format!("{texels:?}"),
             manifest: startup.0.into(),
+            elision: elision.to_string(),
             startup_bytes: startup.1,
             ..Stats::default()
         },

@@ -6,11 +6,10 @@
 use crate::input::Input;
 use crate::io::{Arrival, Io};
 use glam::Vec3;
-use portico_client::cache::ObjectCache;
 use portico_client::cost::CostModel;
-use portico_client::demand::lacking;
 use portico_client::elision::Algorithm;
 use portico_client::engine::catalogue::{Kind, Start, decode_stab, plain_geometry};
+use portico_client::engine::holdings::Holdings;
 use portico_client::frame::{Cached, Decider, Scene};
 use portico_client::navigate::Navigator;
 use portico_client::parts::{Joined, Parts};
@@ -121,6 +120,12 @@ pub struct Stats {
     /// How the page started: `paged` (the core manifest, then each cell's page with its stab
     /// list) or `whole` (the whole manifest and cell graph).
     pub manifest: String,
+    /// The elision the page runs (`optimize` or `impostors`).
+    pub elision: String,
+    /// Cluster boxes the last frame drew (Maciel's traversal), and of them textured ones.
+    pub boxes_drawn: u32,
+    /// See [`Stats::boxes_drawn`].
+    pub textured_boxes_drawn: u32,
     /// Bytes of what it read before its first frame (decoded: the core, or the whole manifest
     /// and cell graph).
     pub startup_bytes: u64,
@@ -141,7 +146,9 @@ pub struct Viewer {
     pub surface: wgpu::Surface<'static>,
     pub config: wgpu::SurfaceConfiguration,
     pub model: Model,
-    pub cache: ObjectCache<Resident>,
+    /// The cache, what is held beside it (larger than the cache, or unusable here), and what
+    /// the last frame lacked.
+    pub held: Holdings<Resident>,
     pub decider: Decider,
     pub cost: CostModel,
     pub io: Io,
@@ -150,12 +157,6 @@ pub struct Viewer {
     pub nav: Navigator,
     /// The tour and the time (s) it started, while it drives the view.
     pub touring: Option<f64>,
-    /// Segments larger than the whole cache, or unusable here: reported as held so that no
-    /// answer lists them again and no stream pushes them again.
-    pub too_big: std::collections::HashSet<u32>,
-    /// What the last frame lacked ([`portico_client::demand::lacking`]), read ahead of the
-    /// server's answer when pulling.
-    pub lacking: Vec<u32>,
     pub stats: Stats,
     /// The instances drawn in the last frame (for the mini-map).
     pub drawn: Vec<u32>,
@@ -182,16 +183,10 @@ impl Viewer {
                     // whole, held under its head's id.
                     let (id, bytes) = match self.model.parts.join(id, bytes) {
                         Joined::Whole(id, bytes) => (id, bytes),
-                        Joined::Complete(head, bytes) => {
-                            // Decoded and held (or found unusable) right below.
-                            self.model.parts.settle(head);
-                            (head, bytes)
-                        }
+                        // Decoded and held (or found unusable) right below.
+                        Joined::Complete(head, bytes) => (head, bytes),
                         Joined::Waiting => {
-                            let head = self.model.parts.head(id);
-                            if self.cache.contains(head) || self.too_big.contains(&head) {
-                                self.model.parts.forget(head);
-                            }
+                            self.held.piece_waits(&mut self.model.parts, id);
                             continue;
                         }
                     };
@@ -240,12 +235,10 @@ impl Viewer {
                     match made {
                         // What the cache released leaves the held set the next frame reports.
                         Ok((value, charge)) => {
-                            if self.cache.insert(id, value, charge).is_err() {
-                                self.too_big.insert(id);
-                            }
+                            self.held.hold(&mut self.model.parts, id, value, charge);
                         }
                         Err(e) => {
-                            self.too_big.insert(id);
+                            self.held.unusable(&mut self.model.parts, id);
                             self.stats.unusable_segments += 1;
                             self.fail(e);
                         }
@@ -253,7 +246,7 @@ impl Viewer {
                 }
                 Arrival::Release(ids) => {
                     self.stats.answers += 1;
-                    ids.iter().for_each(|&id| self.cache.demote(id));
+                    ids.iter().for_each(|&id| self.held.cache.demote(id));
                 }
                 Arrival::Failed(e) | Arrival::Stale(e) => self.fail(e),
             }
@@ -337,23 +330,20 @@ impl Viewer {
         );
         self.draw(&obs, size, now_ms);
         // A held texture segment with its parts, and the parts waiting for the rest.
-        let held = self
-            .model
-            .parts
-            .holding(self.cache.ids().chain(self.too_big.iter().copied()));
-        let incomplete = self.stats.objects_skipped > 0;
+        let held = self.held.held(&self.model.parts);
+        let incomplete = self.held.incomplete;
         self.io.pump(
             obs,
             held.into_iter(),
-            std::mem::take(&mut self.lacking),
+            std::mem::take(&mut self.held.lacking),
             incomplete,
         );
         self.stats.transport = self.io.transport();
         self.stats.stream_sessions = self.io.sessions;
         self.stats.eye = eye.to_array();
         self.stats.dir = dir.to_array();
-        self.stats.resident_bytes = self.cache.bytes();
-        self.stats.cache_peak_bytes = self.cache.peak_bytes();
+        self.stats.resident_bytes = self.held.cache.bytes();
+        self.stats.cache_peak_bytes = self.held.cache.peak_bytes();
         self.stats.gpu_held_peak_bytes = self
             .stats
             .gpu_held_peak_bytes
@@ -371,17 +361,14 @@ impl Viewer {
         let d = self.decider.decide(
             &scene,
             &view,
-            &Cached(&self.cache, &scene),
+            &Cached(&self.held.cache, &scene),
             &self.cost,
             last,
         );
         self.stats.visible_objects = d.visible.objects.len() as u32;
         self.stats.objects_skipped = d.frame.objects_skipped;
         self.stats.lods_skipped = d.frame.lods_skipped;
-        let (cache, too_big) = (&self.cache, &self.too_big);
-        let lacked = lacking(&d, &scene, &|s| cache.contains(s) || too_big.contains(&s));
-        // A texture segment with parts: all of them but those that came.
-        self.lacking = self.model.parts.expand(lacked);
+        self.held.decided(&self.model.parts, &d, &scene);
         if self.stats.first_complete_frame.is_none()
             && !d.visible.objects.is_empty()
             && d.frame.objects_skipped == 0
@@ -393,9 +380,9 @@ impl Viewer {
         let mut draws = Vec::with_capacity(d.drawn.len());
         self.drawn.clear();
         for o in &d.drawn {
-            if let Some(Resident::Mesh(mesh)) = self.cache.get(o.segment) {
+            if let Some(Resident::Mesh(mesh)) = self.held.cache.get(o.segment) {
                 self.drawn.push(o.instance);
-                let cache = &self.cache;
+                let cache = &self.held.cache;
                 draws.push(Draw::of(header, o, mesh, |s| match cache.get(s) {
                     Some(Resident::Texture(t)) => Some(t),
                     _ => None,
@@ -422,7 +409,7 @@ impl Viewer {
         let textured = match &header.hierarchy {
             Some(h) => {
                 self.stand_ins.update(h, &d.boxes, &self.renderer);
-                let cache = &self.cache;
+                let cache = &self.held.cache;
                 let impostor = |s| match cache.get(s) {
                     Some(Resident::Impostor(i)) => Some(i),
                     _ => None,
@@ -431,6 +418,8 @@ impl Viewer {
             }
             None => Vec::new(),
         };
+        self.stats.boxes_drawn = d.boxes.len() as u32;
+        self.stats.textured_boxes_drawn = textured.len() as u32;
         let drawn = self
             .renderer
             .render_into(view_proj, &draws, &textured, &target);
@@ -440,9 +429,6 @@ impl Viewer {
             Err(e) => self.fail(format!("drawing: {e}")),
         }
         self.renderer.queue().present(frame);
-        for &s in &d.touched {
-            self.cache.touch(s);
-        }
         self.stats.frames += 1;
     }
 }

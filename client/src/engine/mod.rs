@@ -8,10 +8,13 @@
 //! - [`push`]: one `/v1/stream` session: what to send each frame, what a pushed frame is.
 //! - [`catalogue`]: what the client knows of the segments (rows, kinds, decoded sizes), and the
 //!   model it starts from, whole or paged ([`catalogue::Start`]).
+//! - [`holdings`]: what a frame loop holds between frames (the cache, what is held beside it, what
+//!   the last frame lacked) and the steps every front end runs on it.
 //! - [`pages`]: the paged manifest, learnt cell by cell with the stab lists.
 //! - [`reopen`]: when to try a push session again (back-off), pull reading meanwhile.
 
 pub mod catalogue;
+pub mod holdings;
 pub mod pages;
 pub mod pull;
 pub mod push;

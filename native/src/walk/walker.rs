@@ -8,10 +8,9 @@ use crate::drive::{Ask, Event};
 use crate::io::{IoStage, Payload};
 use anyhow::{Context, Result};
 use glam::Vec3;
-use portico_client::cache::ObjectCache;
 use portico_client::cost::{CostModel, OnlineCost};
-use portico_client::demand::lacking;
 use portico_client::engine::catalogue::Start;
+use portico_client::engine::holdings::Holdings;
 use portico_client::frame::{Cached, Decider, Scene};
 use portico_client::stats::{FrameRow, Series, write_csv};
 use portico_client::view::{self, Viewpoint};
@@ -22,18 +21,13 @@ use portico_render::{Draw, Renderer, StandIns};
 pub(super) struct Walker<'a> {
     pub(super) cfg: &'a WalkConfig,
     model: Model,
-    cache: ObjectCache<Resident>,
+    /// The cache, what is held beside it, and what the last frame lacked.
+    held: Holdings<Resident>,
     decider: Decider,
     cost: CostModel,
     pub(super) online: OnlineCost,
     consumed: u64,
     stand_ins: StandIns,
-    /// Segments larger than the whole cache: reported as held so no answer lists them again.
-    too_big: std::collections::HashSet<u32>,
-    /// What the last frame lacked ([`portico_client::demand::lacking`]), for the IO stage.
-    lacking: Vec<u32>,
-    /// Whether the last frame skipped objects ([`crate::drive::Ask::incomplete`]).
-    incomplete: bool,
     latencies: Vec<f64>,
     failures: u64,
     database_changed: bool,
@@ -55,7 +49,7 @@ impl<'a> Walker<'a> {
         Walker {
             cfg,
             model,
-            cache: ObjectCache::new(portico_client::cache::split_budget(cfg.cache_bytes).0),
+            held: Holdings::new(portico_client::cache::split_budget(cfg.cache_bytes).0),
             decider: Decider::new(
                 cfg.elision,
                 cfg.budget_s,
@@ -65,9 +59,6 @@ impl<'a> Walker<'a> {
             online: OnlineCost::default(),
             consumed: 0,
             stand_ins: StandIns::default(),
-            too_big: std::collections::HashSet::new(),
-            lacking: Vec::new(),
-            incomplete: false,
             latencies: Vec::new(),
             failures: 0,
             database_changed: false,
@@ -97,6 +88,8 @@ impl<'a> Walker<'a> {
                     self.segments_read += 1;
                     self.bytes_read += bytes;
                     self.latencies.push(listed_at.elapsed().as_secs_f64());
+                    let shared = self.model.parts.clone();
+                    let mut parts = shared.lock().unwrap_or_else(|e| e.into_inner());
                     // An atlas is charged what it holds on the GPU, not its PNG size; a
                     // compressed mesh what it decoded to; a texture joined from its parts is
                     // held under its head's id, the parts before it are not held at all.
@@ -131,34 +124,20 @@ impl<'a> Walker<'a> {
                             (Resident::Texture(t), gpu)
                         }
                         Payload::Piece => {
-                            // A piece of a segment already held: nothing waits for it.
-                            let head = self.parts().head(id);
-                            if self.cache.contains(head) || self.too_big.contains(&head) {
-                                self.parts().forget(head);
-                            }
+                            self.held.piece_waits(&mut parts, id);
                             continue;
                         }
                         Payload::Unusable(head, e) => {
                             self.failures += 1;
                             tracing::warn!("io: {e}");
-                            self.too_big.insert(head);
-                            self.parts().settle(head);
+                            self.held.unusable(&mut parts, head);
                             continue;
                         }
                     };
-                    match self.cache.insert(key, value, charge) {
-                        Ok(released) => row.released_segments += released.len() as u32,
-                        // Larger than the whole cache: never ask for it again.
-                        Err(_) => {
-                            self.too_big.insert(key);
-                        }
-                    }
-                    // Held (or too big) now: a joined segment's pieces need no more reporting.
-                    if key != id {
-                        self.parts().settle(key);
-                    }
+                    let released = self.held.hold(&mut parts, key, value, charge);
+                    row.released_segments += released.len() as u32;
                 }
-                Event::Answer(resp) => resp.evict.iter().for_each(|&id| self.cache.demote(id)),
+                Event::Answer(resp) => resp.evict.iter().for_each(|&id| self.held.cache.demote(id)),
                 Event::Failed(e) => {
                     self.failures += 1;
                     tracing::warn!("io: {e}");
@@ -208,7 +187,7 @@ impl<'a> Walker<'a> {
         let d = self.decider.decide(
             &scene,
             &view,
-            &Cached(&self.cache, &scene),
+            &Cached(&self.held.cache, &scene),
             &cost,
             self.last_frame_s,
         );
@@ -220,18 +199,15 @@ impl<'a> Walker<'a> {
         row.predicted_s = d.frame.predicted_s;
         row.lods_skipped = d.frame.lods_skipped;
         row.objects_skipped = d.frame.objects_skipped;
-        let (cache, too_big) = (&self.cache, &self.too_big);
-        let lacked = lacking(&d, &scene, &|s| cache.contains(s) || too_big.contains(&s));
-        // A texture segment with parts: all of them but those that came.
-        let lacking = self.parts().expand(lacked);
-        self.lacking = lacking;
-        self.incomplete = d.frame.objects_skipped > 0;
+        let parts = self.model.parts.clone();
+        self.held
+            .decided(&parts.lock().unwrap_or_else(|e| e.into_inner()), &d, &scene);
 
         if let Some(h) = &self.model.header.hierarchy {
             self.stand_ins.update(h, &d.boxes, r);
         }
         let header = &self.model.header;
-        let cache = &self.cache;
+        let cache = &self.held.cache;
         let mut draws = Vec::with_capacity(d.drawn.len() + d.boxes.len());
         for o in &d.drawn {
             if let Some(Resident::Mesh(mesh)) = cache.get(o.segment) {
@@ -264,11 +240,8 @@ impl<'a> Walker<'a> {
             self.picture = Some(r.picture_with_boxes(&view.camera, &draws, &textured)?);
             self.picture_s = t.elapsed().as_secs_f64();
         }
-        for &s in &d.touched {
-            self.cache.touch(s);
-        }
-        row.resident_segments = self.cache.len() as u32;
-        row.resident_bytes = self.cache.bytes();
+        row.resident_segments = self.held.cache.len() as u32;
+        row.resident_bytes = self.held.cache.bytes();
         self.gpu_held_peak = self.gpu_held_peak.max(r.gpu_bytes_held());
         Ok(())
     }
@@ -281,13 +254,11 @@ impl<'a> Walker<'a> {
         let _ = io.state.send(Some(Ask {
             observer,
             // A held texture segment with its parts, and the parts waiting for the rest.
-            held: self
-                .parts()
-                .holding(self.cache.ids().chain(self.too_big.iter().copied())),
+            held: self.held.held(&self.parts()),
             consumed: self.consumed,
             wants: None,
-            lacking: self.lacking.clone(),
-            incomplete: self.incomplete,
+            lacking: self.held.lacking.clone(),
+            incomplete: self.held.incomplete,
             at: std::time::Instant::now(),
         }));
     }
@@ -339,9 +310,9 @@ impl<'a> Walker<'a> {
             visibility_fallback_frames: rows.iter().filter(|r| r.visibility_fallback).count()
                 as u64,
             cache_budget: self.cfg.cache_bytes,
-            cache_peak_bytes: self.cache.peak_bytes(),
+            cache_peak_bytes: self.held.cache.peak_bytes(),
             gpu_held_peak_bytes: self.gpu_held_peak,
-            evictions: self.cache.evictions(),
+            evictions: self.held.cache.evictions(),
             first_complete: first_complete(rows),
             segments_read: self.segments_read,
             bytes_read: self.bytes_read,
