@@ -10,9 +10,9 @@
 //!   in flight at a time and up to [`portico_client::defaults::PARALLEL`] segment batches from the top of the latest
 //!   list: what the last frame lacked, then what of the answer cannot wait.
 //!
-//! A stream that does not open within [`OPEN_WAIT`], or closes (a server restart), hands over
-//! to pull at once and is tried again with the native client's back-off
-//! ([`portico_client::engine::reopen`]).
+//! Which of them carries the segments, and when a session is tried again after one did not
+//! open or closed (a server restart), is the engine's [`Switch`]: the first session holds pull
+//! back 2 s at most, a later one opens while pull reads on, with the native client's back-off.
 
 use crate::net::{Remote, Stale};
 use crate::stream::Stream;
@@ -21,23 +21,20 @@ use portico_client::engine::catalogue::{Catalogue, Kind};
 use portico_client::engine::pages::{Pages, Readiness, TakenPage};
 use portico_client::engine::pull::{self, Command, Fault, FrameState, Pull};
 use portico_client::engine::push::{self, Push, Pushed};
-use portico_client::engine::reopen::Reopen;
+use portico_client::engine::switch::{Carrier, Switch};
 use portico_protocol::{Observer, Policy, PrefetchResponse};
 use std::cell::RefCell;
 use std::collections::{HashMap, VecDeque};
 use std::rc::Rc;
 use web_time::Instant;
 
-pub use portico_client::engine::reopen::{OPEN_TIMEOUT, OPEN_WAIT};
 /// Most pushed bytes taken into the cache in one frame: the rest waits for the next frames, so
 /// a burst of pushes never makes one long frame.
 pub const PUSHED_PER_FRAME: u64 = 4 << 20;
 
-/// A stream session: its socket, when it was opened, and the engine's session state once the
-/// socket is open.
+/// A stream session: its socket, and the engine's session state once the socket is open.
 struct Session {
     socket: Stream,
-    since: Instant,
     push: Option<Push>,
 }
 
@@ -75,15 +72,10 @@ pub struct Io {
     pull: Pull,
     inbox: Rc<RefCell<VecDeque<Done>>>,
     stopped: bool,
-    /// Whether to push (else pull only), the session, when it was opened, and when the next
-    /// one may be.
-    push: bool,
+    /// Push or pull now, and when to try a session ([`portico_client::engine::switch`]).
+    switch: Switch,
+    /// The stream session, while one is opening or open.
     stream: Option<Session>,
-    retry_at: Option<Instant>,
-    /// The wait before the next session after one failed or ended.
-    backoff: Reopen,
-    /// Stream sessions opened so far.
-    pub sessions: u64,
     /// Whether the stream carried the segments at the last frame.
     was_pushing: bool,
 }
@@ -101,11 +93,8 @@ impl Io {
         push: bool,
     ) -> Io {
         Io {
-            push,
+            switch: Switch::new(push),
             stream: None,
-            retry_at: None,
-            backoff: Reopen::default(),
-            sessions: 0,
             was_pushing: false,
             remote,
             catalogue: Rc::new(RefCell::new(catalogue)),
@@ -171,12 +160,7 @@ impl Io {
     /// What the stream pushed, checked like pulled segments (a rejected one is given back to
     /// the server); a closed stream hands over to pull.
     fn take_pushed(&mut self, out: &mut Vec<Arrival>) {
-        let Some(Session {
-            socket,
-            push,
-            since,
-        }) = &mut self.stream
-        else {
+        let Some(Session { socket, push }) = &mut self.stream else {
             return;
         };
         let now = Instant::now();
@@ -245,16 +229,21 @@ impl Io {
             match push::ended(socket.url(), close) {
                 Fault::Stale(why) => {
                     out.push(Arrival::Stale(why));
+                    self.switch.stale();
                     self.stopped = true;
                 }
                 Fault::Failed(why) => {
                     out.push(Arrival::Failed(format!("{why}; pulling over HTTP")));
-                    self.backoff.ended(now.duration_since(*since));
-                    self.retry_at = Some(now + self.backoff.next_try());
+                    self.switch.failed(now);
                 }
             }
             self.stream = None;
         }
+    }
+
+    /// Stream sessions tried so far.
+    pub fn sessions(&self) -> u64 {
+        self.switch.tries()
     }
 
     /// Which transport brings segments now: `stream` or `pull`.
@@ -274,25 +263,26 @@ impl Io {
     /// may still open), so pull stays idle. An open session hears the frame (what the cache
     /// released since the last, what the frame lacked, the observer).
     fn pushing(&mut self, state: &FrameState, now: Instant) -> bool {
-        if !self.push {
-            return false;
-        }
-        if self.stream.is_none() && self.retry_at.is_none_or(|t| now >= t) {
+        if self.stream.is_none() && self.switch.open_now(now) {
             let db = self.remote.database();
             match Stream::open(self.remote.base(), db.as_deref(), self.remote.token()) {
-                Ok(socket) => {
-                    self.stream = Some(Session {
-                        socket,
-                        since: now,
-                        push: None,
-                    });
-                    self.sessions += 1;
-                }
-                Err(_) => self.retry_at = Some(now + self.backoff.next_try()),
+                Ok(socket) => self.stream = Some(Session { socket, push: None }),
+                Err(_) => self.switch.failed(now),
             }
         }
-        let pushing = match &mut self.stream {
-            Some(Session { socket, push, .. }) if socket.is_open() => {
+        if let Some(s) = &self.stream
+            && s.push.is_none()
+        {
+            if s.socket.is_open() {
+                self.switch.opened(now);
+            } else if self.switch.timed_out(now) {
+                // Not open in time: pull, and try another session later.
+                self.stream = None;
+                self.switch.failed(now);
+            }
+        }
+        let pushing = match (self.switch.carrier(now), &mut self.stream) {
+            (Carrier::Push, Some(Session { socket, push })) => {
                 let push = push.get_or_insert_with(|| {
                     // Opened: Hello, then what the cache holds (a session opened again).
                     let held = state.held.iter().copied();
@@ -320,18 +310,9 @@ impl Io {
                 }
                 true
             }
-            // Opening. The page's first session: pull waits a moment for it (a cold start would
-            // read everything twice otherwise); a later one opens while pull reads on.
-            Some(s) if s.push.is_none() && now.duration_since(s.since) < OPEN_TIMEOUT => {
-                self.sessions == 1 && now.duration_since(s.since) < OPEN_WAIT
-            }
-            // Not open in time: pull, and try another session later.
-            Some(_) => {
-                self.stream = None;
-                self.retry_at = Some(now + self.backoff.next_try());
-                false
-            }
-            None => false,
+            // The first session opening: pull waits a moment for it.
+            (Carrier::Waiting, _) => true,
+            _ => false,
         };
         if pushing && !self.was_pushing {
             // The stream takes over: what pull still meant to read is the stream's now.

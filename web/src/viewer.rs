@@ -339,7 +339,7 @@ impl Viewer {
             incomplete,
         );
         self.stats.transport = self.io.transport();
-        self.stats.stream_sessions = self.io.sessions;
+        self.stats.stream_sessions = self.io.sessions();
         self.stats.eye = eye.to_array();
         self.stats.dir = dir.to_array();
         self.stats.resident_bytes = self.held.cache.bytes();

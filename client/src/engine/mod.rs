@@ -12,6 +12,7 @@
 //!   the last frame lacked) and the steps every front end runs on it.
 //! - [`pages`]: the paged manifest, learnt cell by cell with the stab lists.
 //! - [`reopen`]: when to try a push session again (back-off), pull reading meanwhile.
+//! - [`switch`]: which transport carries the segments now, and when to open a session.
 
 pub mod catalogue;
 pub mod holdings;
@@ -19,3 +20,4 @@ pub mod pages;
 pub mod pull;
 pub mod push;
 pub mod reopen;
+pub mod switch;
