@@ -5,21 +5,9 @@ mod common;
 
 use portico_data::cells::CellGraph;
 use portico_data::format::{CellPage, Header, InstanceRecord, UNKNOWN_ROW, take_rows};
-use portico_protocol::SegmentInfo;
 
 fn tiny() -> portico_data::prefetch::Prefetcher {
     common::prefetcher_for(3, 2, true, &Default::default(), None)
-}
-
-fn rows(db: &portico_data::Database) -> Vec<SegmentInfo> {
-    db.segments()
-        .iter()
-        .map(|e| SegmentInfo {
-            kind: e.kind,
-            bytes: e.length,
-            checksum: e.checksum,
-        })
-        .collect()
 }
 
 #[test]
@@ -27,7 +15,7 @@ fn pages_grow_a_sparse_header_into_the_whole_one() {
     let p = tiny();
     let db = p.database();
     let full = db.header();
-    let table = rows(db);
+    let table = db.rows();
     let cells = full.cells.as_ref().expect("cells");
     let core = full.core();
     assert!(core.instances.is_empty());
@@ -133,7 +121,7 @@ fn a_hostile_page_is_refused_naming_what_is_wrong() {
     let p = tiny();
     let db = p.database();
     let full = db.header();
-    let table = rows(db);
+    let table = db.rows();
     let cells = full.cells.as_ref().unwrap();
     let (cell, seg) = cells
         .stab_segments

@@ -10,7 +10,7 @@ use crate::state::AppState;
 use bytes::Bytes;
 use portico_data::Database;
 use portico_data::cells::CellGraph;
-use portico_protocol::{CoreManifest, PROTOCOL_VERSION, SegmentInfo};
+use portico_protocol::{CoreManifest, PROTOCOL_VERSION};
 use std::sync::{Arc, Mutex, OnceLock};
 
 /// Most bytes the pages kept may take (counted at twice their bincode: the gzip coding and
@@ -90,17 +90,6 @@ impl Pages {
     }
 }
 
-/// A segment's manifest row.
-pub fn row(db: &Database, id: u32) -> SegmentInfo {
-    db.segments()
-        .get(id as usize)
-        .map_or(portico_data::format::UNKNOWN_ROW, |e| SegmentInfo {
-            kind: e.kind,
-            bytes: e.length,
-            checksum: e.checksum,
-        })
-}
-
 /// The core manifest of `db` (with `graph`'s frame), bincode-encoded.
 pub fn core_bincode(
     db: &Database,
@@ -118,7 +107,7 @@ pub fn core_bincode(
         rows: h
             .unowned_segments()
             .into_iter()
-            .map(|s| (s, row(db, s)))
+            .map(|s| (s, db.row(s)))
             .collect(),
         header: h.core(),
         graph: graph.map(CellGraph::core),
@@ -148,7 +137,7 @@ impl AppState {
             .ok_or_else(|| Error::not_found("this database has no cells"))?;
         let stab = self.prefetcher.stab(cell)?;
         let db = self.db();
-        let page = db.header().page(cell, seg, &stab, &|s| row(db, s), graph);
+        let page = db.header().page(cell, seg, &stab, &|s| db.row(s), graph);
         let bincode = portico_protocol::to_bincode(&page)
             .map_err(|e| Error::internal("page does not encode", e))?;
         let p = Arc::new(EncodedPage {

@@ -8,7 +8,7 @@ use crate::metrics::Metrics;
 use bytes::Bytes;
 use portico_data::prefetch::Prefetcher;
 use portico_data::{DataError, Database};
-use portico_protocol::{Manifest, PROTOCOL_VERSION, SegmentInfo};
+use portico_protocol::{Manifest, PROTOCOL_VERSION};
 use std::sync::{Arc, OnceLock};
 use tokio::sync::{Semaphore, watch};
 
@@ -177,15 +177,7 @@ fn manifest<'a>(db: &'a Database, id: &str) -> Manifest<&'a portico_data::format
         protocol_version: PROTOCOL_VERSION,
         database_id: id.to_string(),
         file_bytes: db.file_len(),
-        segments: db
-            .segments()
-            .iter()
-            .map(|e| SegmentInfo {
-                kind: e.kind,
-                bytes: e.length,
-                checksum: e.checksum,
-            })
-            .collect(),
+        segments: db.rows(),
         header: db.header(),
     }
 }

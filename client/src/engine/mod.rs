@@ -21,3 +21,19 @@ pub mod pull;
 pub mod push;
 pub mod reopen;
 pub mod switch;
+
+/// An observer standing at `x` on the x axis at eye height, looking along -z: the engine tests'.
+#[cfg(test)]
+fn test_observer(x: f32) -> portico_protocol::Observer {
+    portico_protocol::Observer {
+        eye: [x, 1.6, 0.0],
+        dir: [0.0, 0.0, -1.0],
+        up: [0.0, 1.0, 0.0],
+        velocity: [0.0; 3],
+        half_fov_x: 0.5,
+        half_fov_y: 0.4,
+        max_speed: 2.0,
+        max_turn: 1.0,
+        turn: [0.0; 3],
+    }
+}

@@ -96,6 +96,25 @@ impl Database {
         &self.index
     }
 
+    /// Segment `id`'s manifest row (kind, bytes, xxh3); [`super::UNKNOWN_ROW`] for an id the
+    /// file does not have.
+    pub fn row(&self, id: u32) -> portico_protocol::SegmentInfo {
+        self.index
+            .get(id as usize)
+            .map_or(super::UNKNOWN_ROW, |e| portico_protocol::SegmentInfo {
+                kind: e.kind,
+                bytes: e.length,
+                checksum: e.checksum,
+            })
+    }
+
+    /// The manifest's segment table: every segment's row, by id.
+    pub fn rows(&self) -> Vec<portico_protocol::SegmentInfo> {
+        (0..self.index.len() as u32)
+            .map(|id| self.row(id))
+            .collect()
+    }
+
     /// A texture segment's whole bytes: its head's and its parts', joined in order (each
     /// checksum-verified as [`Database::segment`] does).
     ///

@@ -5,7 +5,7 @@ use super::*;
 use crate::engine::catalogue::{Kind, Start};
 use portico_data::Database;
 use portico_data::texture::TexelFormat;
-use portico_protocol::{CoreManifest, PROTOCOL_VERSION, SegmentInfo};
+use portico_protocol::{CoreManifest, PROTOCOL_VERSION};
 use std::sync::OnceLock;
 
 /// The tiny generated building (seed 3, two storeys), built once with cells.
@@ -31,21 +31,10 @@ fn tiny() -> &'static (tempfile::TempDir, Database) {
     })
 }
 
-fn rows(db: &Database) -> Vec<SegmentInfo> {
-    db.segments()
-        .iter()
-        .map(|e| SegmentInfo {
-            kind: e.kind,
-            bytes: e.length,
-            checksum: e.checksum,
-        })
-        .collect()
-}
-
 /// What the server's `/v1/manifest/core` says of `db`.
 fn core_of(db: &Database) -> CoreManifest<Header, GraphCore> {
     let h = db.header();
-    let table = rows(db);
+    let table = db.rows();
     CoreManifest {
         protocol_version: PROTOCOL_VERSION,
         database_id: "tiny".into(),
@@ -67,7 +56,7 @@ fn core_of(db: &Database) -> CoreManifest<Header, GraphCore> {
 fn page_of(db: &Database, cell: u32) -> CellPage {
     let h = db.header();
     let seg = h.cells.as_ref().unwrap().stab_segment(cell).unwrap();
-    let table = rows(db);
+    let table = db.rows();
     let graph = db.cell_graph().unwrap().unwrap();
     let stab = db.stab_list(cell).unwrap();
     h.page(cell, seg, &stab, &|s| table[s as usize], &graph)
@@ -77,7 +66,7 @@ fn page_of(db: &Database, cell: u32) -> CellPage {
 fn pages_grow_the_start_into_what_the_whole_manifest_says() {
     let (_, db) = tiny();
     let full = db.header();
-    let table = rows(db);
+    let table = db.rows();
     let mut start = Start::paged(core_of(db), TexelFormat::Rgba8).unwrap();
     let mut pages = start.pages.take().unwrap();
     let live: Vec<(u32, u32)> = full.cells.as_ref().unwrap().stab_lists().collect();

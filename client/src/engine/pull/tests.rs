@@ -10,23 +10,9 @@ fn wire(_: u32) -> u64 {
     SEG
 }
 
-fn observer(x: f32) -> Observer {
-    Observer {
-        eye: [x, 1.6, 0.0],
-        dir: [0.0, 0.0, -1.0],
-        up: [0.0, 1.0, 0.0],
-        velocity: [0.0; 3],
-        half_fov_x: 0.5,
-        half_fov_y: 0.4,
-        max_speed: 2.0,
-        max_turn: 1.0,
-        turn: [0.0; 3],
-    }
-}
-
 fn frame(lacking: Vec<u32>, consumed: u64) -> FrameState {
     FrameState {
-        observer: observer(0.0),
+        observer: crate::engine::test_observer(0.0),
         held: Vec::new(),
         lacking,
         incomplete: false,
@@ -162,7 +148,7 @@ fn one_prefetch_request_at_a_time_with_the_latest_observer() {
     assert_eq!(asks(&drain(&mut pull, t0)), vec![1]);
     for (i, x) in [1.0, 2.0, 3.0].into_iter().enumerate() {
         let f = FrameState {
-            observer: observer(x),
+            observer: crate::engine::test_observer(x),
             ..frame(vec![], 0)
         };
         let at = ms(t0, 16 * (i as u64 + 1));

@@ -1,25 +1,11 @@
 //! A push session's messages, on a simulated clock.
 
 use super::*;
-use portico_protocol::{Observer, decode_held};
-
-fn observer() -> Observer {
-    Observer {
-        eye: [0.0, 1.6, 0.0],
-        dir: [0.0, 0.0, -1.0],
-        up: [0.0, 1.0, 0.0],
-        velocity: [0.0; 3],
-        half_fov_x: 0.5,
-        half_fov_y: 0.4,
-        max_speed: 2.0,
-        max_turn: 1.0,
-        turn: [0.0; 3],
-    }
-}
+use portico_protocol::decode_held;
 
 fn frame(held: &[u32], lacking: &[u32], consumed: u64) -> FrameState {
     FrameState {
-        observer: observer(),
+        observer: crate::engine::test_observer(0.0),
         held: held.to_vec(),
         lacking: lacking.to_vec(),
         incomplete: false,
