@@ -63,16 +63,18 @@ impl FromStr for Transport {
     }
 }
 
-use portico_client::engine::reopen::Reopen;
-pub use portico_client::engine::reopen::{OPEN_TIMEOUT, REOPEN_FIRST, REOPEN_MAX};
+pub use portico_client::engine::reopen::{OPEN_TIMEOUT, OPEN_WAIT, REOPEN_FIRST, REOPEN_MAX};
+use portico_client::engine::switch::{Carrier, Switch};
 
 /// Runs the IO stage until the frame loop goes away: over push when `transport` says so (at
 /// `rate_bytes_per_s`, which the server may cap), over pull ([`crate::drive::drive`], with
-/// `parallel` and `window`) otherwise. When a session ends or does not open, pull reads while
-/// sessions are tried again in the background, with back-off ([`REOPEN_FIRST`] doubling to
-/// [`REOPEN_MAX`]); the first that opens takes over, told what the cache holds. A session
-/// refused because the server now serves another database ([`portico_protocol::CLOSE_STALE`]
-/// or `410 Gone`) is [`Event::Stale`], as pull's 410 is: the IO stage stops.
+/// `parallel` and `window`) otherwise. Which one carries the segments is the engine's
+/// [`Switch`]: the first session holds pull back [`OPEN_WAIT`] at most; when a session ends or
+/// does not open, pull reads while sessions are tried again in the background, with back-off
+/// ([`REOPEN_FIRST`] doubling to [`REOPEN_MAX`]); the first that opens takes over, told what
+/// the cache holds. A session refused because the server now serves another database
+/// ([`portico_protocol::CLOSE_STALE`] or `410 Gone`) is [`Event::Stale`], as pull's 410 is:
+/// the IO stage stops.
 #[allow(clippy::too_many_arguments)]
 pub async fn run<F: Fetcher>(
     fetcher: F,
@@ -84,82 +86,109 @@ pub async fn run<F: Fetcher>(
     mut state: watch::Receiver<Option<Ask>>,
     tx: mpsc::Sender<Event<F::Body>>,
 ) {
-    if transport == Transport::Pull {
-        let never = std::future::pending();
-        drive_after(0, fetcher, policy, parallel, window, state, tx, never).await;
-        return;
-    }
+    let mut switch = Switch::new(transport == Transport::Push);
     let mut events = 0;
-    let mut backoff = Reopen::default();
-    let mut ws = match open(&fetcher).await {
-        Ok(ws) => Some(ws),
-        Err(Ended::Failed(why)) => {
-            let msg = format!("{why}; reading over HTTP pull instead");
-            if tx.send(Event::Failed(msg)).await.is_err() {
-                return;
-            }
-            events += 1;
-            None
-        }
-        Err(end) => return stop(end, &tx).await,
-    };
+    // The session being opened (polled here, so that it goes when the stage does), and the
+    // one open.
+    let mut opening = None;
+    let mut socket = None;
     loop {
-        if let Some(ws) = ws.take() {
-            let began = Instant::now();
-            let (ended, sent) = push(
-                ws,
-                &fetcher,
-                policy,
-                rate_bytes_per_s,
-                events,
-                &mut state,
-                &tx,
-            )
-            .await;
-            events = sent;
-            let Ended::Failed(why) = ended else {
-                return stop(ended, &tx).await;
-            };
-            backoff.ended(began.elapsed());
-            let msg = format!("{why}; reading over HTTP pull, opening the stream again");
-            if tx.send(Event::Failed(msg)).await.is_err() {
-                return;
-            }
-            events += 1;
+        if switch.open_now(Instant::now()) {
+            opening = Some(Box::pin(open(fetcher.clone())));
         }
-        // Pull until a session opens (tried in the background, so reads go on meanwhile).
-        let (opened_tx, opened_rx) = tokio::sync::oneshot::channel();
-        let opener = tokio::spawn(reopen(fetcher.clone(), backoff.clone(), opened_tx));
-        let mut opened = None;
-        let until = async {
-            opened = opened_rx.await.ok();
-        };
-        let pulled = drive_after(
-            events,
-            fetcher.clone(),
-            policy,
-            parallel,
-            window,
-            state.clone(),
-            tx.clone(),
-            until,
-        )
-        .await;
-        opener.abort();
-        let Some(n) = pulled else { return };
-        events = n;
-        match opened {
-            Some(Ok((socket, after))) => {
-                ws = Some(socket);
-                backoff = after;
+        let mut settled = None;
+        match switch.carrier(Instant::now()) {
+            Carrier::Stopped => return,
+            Carrier::Push => {
+                let Some(ws) = socket.take() else { return };
+                let (ended, sent) = push(
+                    ws,
+                    &fetcher,
+                    policy,
+                    rate_bytes_per_s,
+                    events,
+                    &mut state,
+                    &tx,
+                )
+                .await;
+                events = sent;
+                let Ended::Failed(why) = ended else {
+                    return stop(ended, &tx).await;
+                };
+                switch.failed(Instant::now());
+                let msg = format!("{why}; reading over HTTP pull, opening the stream again");
+                if tx.send(Event::Failed(msg)).await.is_err() {
+                    return;
+                }
+                events += 1;
             }
-            Some(Err(end)) => return stop(end, &tx).await,
-            // The opener failed (it cannot, short of a panic): pull for the rest of the walk.
-            None => {
-                let never = std::future::pending();
-                drive_after(events, fetcher, policy, parallel, window, state, tx, never).await;
-                return;
+            Carrier::Waiting => {
+                // The first session: pull waits for it a moment.
+                if let Some(o) = opening.as_mut() {
+                    settled = tokio::time::timeout(OPEN_WAIT, o).await.ok();
+                }
             }
+            Carrier::Pull => {
+                // Pull until a session opens (tried in the background after each back-off,
+                // so reads go on meanwhile), the first try fails, or the database is stale.
+                let until = async {
+                    loop {
+                        let Some(o) = opening.as_mut() else {
+                            match switch.next_try(Instant::now()) {
+                                Some(at) => tokio::time::sleep_until(at.into()).await,
+                                None => std::future::pending::<()>().await,
+                            }
+                            if switch.open_now(Instant::now()) {
+                                opening = Some(Box::pin(open(fetcher.clone())));
+                            }
+                            continue;
+                        };
+                        let result = o.await;
+                        opening = None;
+                        match result {
+                            Err(Ended::Failed(why)) if switch.tries() > 1 => {
+                                switch.failed(Instant::now());
+                                tracing::debug!("stream: {why}");
+                            }
+                            other => {
+                                settled = Some(other);
+                                return;
+                            }
+                        }
+                    }
+                };
+                let pulled = drive_after(
+                    events,
+                    fetcher.clone(),
+                    policy,
+                    parallel,
+                    window,
+                    state.clone(),
+                    tx.clone(),
+                    until,
+                )
+                .await;
+                let Some(n) = pulled else { return };
+                events = n;
+            }
+        }
+        let Some(result) = settled else { continue };
+        opening = None;
+        match result {
+            Ok(ws) => {
+                switch.opened(Instant::now());
+                socket = Some(ws);
+            }
+            Err(Ended::Failed(why)) => {
+                // The first try (later ones fail quietly while pull reads).
+                switch.failed(Instant::now());
+                let msg = format!("{why}; reading over HTTP pull instead");
+                if tx.send(Event::Failed(msg)).await.is_err() {
+                    return;
+                }
+                events += 1;
+            }
+            Err(end) => return stop(end, &tx).await,
         }
     }
 }
@@ -175,31 +204,8 @@ async fn stop<B>(end: Ended, tx: &mpsc::Sender<Event<B>>) {
 type Socket =
     tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
-/// Tries to open a session after each of `backoff`'s waits; sends the first that opens (with
-/// the back-off to go on with after it ends), or a stale database.
-async fn reopen<F: Fetcher>(
-    f: F,
-    mut backoff: Reopen,
-    opened: tokio::sync::oneshot::Sender<Result<(Socket, Reopen), Ended>>,
-) {
-    loop {
-        tokio::time::sleep(backoff.next_try()).await;
-        match open(&f).await {
-            Ok(ws) => {
-                let _ = opened.send(Ok((ws, backoff)));
-                return;
-            }
-            Err(Ended::Failed(why)) => tracing::debug!("stream: {why}"),
-            Err(end) => {
-                let _ = opened.send(Err(end));
-                return;
-            }
-        }
-    }
-}
-
 /// Opens a session (the handshake within [`OPEN_TIMEOUT`]).
-async fn open<F: Fetcher>(f: &F) -> Result<Socket, Ended> {
+async fn open<F: Fetcher>(f: F) -> Result<Socket, Ended> {
     let url = f
         .stream_url()
         .map_err(|e| Ended::Failed(format!("{e:#}")))?;

@@ -99,6 +99,15 @@ impl Switch {
         self.state = State::Off;
     }
 
+    /// When the next session is due (after the back-off; `now` if at once), if none is open
+    /// or opening and sessions are wanted at all.
+    pub fn next_try(&self, now: Instant) -> Option<Instant> {
+        match self.state {
+            State::Idle(at) if !self.stale => Some(at.unwrap_or(now)),
+            _ => None,
+        }
+    }
+
     /// Whether the session being opened has taken too long ([`OPEN_TIMEOUT`]): the front end
     /// gives it up and says [`Switch::failed`].
     pub fn timed_out(&self, now: Instant) -> bool {
@@ -159,6 +168,7 @@ mod tests {
         sw.failed(s(t, 2.0));
         assert_eq!(sw.carrier(s(t, 2.0)), Carrier::Pull);
         assert!(!sw.open_now(s(t, 2.5)), "the back-off");
+        assert_eq!(sw.next_try(s(t, 2.5)), Some(s(t, 2.0) + REOPEN_FIRST));
         assert!(sw.open_now(s(t, 2.0) + REOPEN_FIRST));
         // A later try opening: pull reads on meanwhile.
         assert_eq!(sw.carrier(s(t, 3.1)), Carrier::Pull);
@@ -185,6 +195,7 @@ mod tests {
         let t = Instant::now();
         let mut pull = Switch::new(false);
         assert!(!pull.open_now(t));
+        assert_eq!(pull.next_try(t), None, "pull only tries nothing");
         assert_eq!(pull.carrier(t), Carrier::Pull);
         let mut sw = Switch::new(true);
         sw.open_now(t);

@@ -22,9 +22,10 @@ use super::world::World;
 use crate::drawn::DrawnFrame;
 use portico_client::cache::ObjectCache;
 use portico_client::cost::CostModel;
-use portico_client::demand::{ahead_of, lacking};
+use portico_client::demand::ahead_of;
 use portico_client::elision::{Algorithm, Candidate, Choice};
-use portico_client::frame::{Decider, Decision, Resident};
+use portico_client::engine::holdings::Holdings;
+use portico_client::frame::{Decider, Resident};
 use portico_client::parts::{Joined, Parts};
 use portico_data::cells::StabList;
 use portico_native::drive::{Ask, Event};
@@ -192,13 +193,13 @@ pub async fn client(s: Setup) -> ClientResult {
         tick.tick().await;
         c.take_arrivals();
         let p = (s.offset + f as usize) % s.world.path_frames();
-        let (row, decided) = c.frame(p);
+        let row = c.frame(p);
         if c.result.first_complete.is_none() && row.objects_skipped == 0 && row.visible_objects > 0
         {
             c.result.first_complete = Some((f, c.result.bytes_fetched));
         }
         c.result.rows.push(row);
-        let published = c.publish(p, f, &decided);
+        let published = c.publish(p, f);
         let _ = state_tx.send(Some(published));
         s.done.fetch_add(1, Ordering::Relaxed);
     }
@@ -213,7 +214,8 @@ struct Client {
     mode: Mode,
     frames: u64,
     rx: mpsc::Receiver<Msg>,
-    cache: ObjectCache<()>,
+    /// The real client's holdings (values are sizes only: `()` charged what they decode to).
+    holdings: Holdings<()>,
     /// Resident segments: (bytes, drawn at least once).
     entries: HashMap<u32, (u64, bool)>,
     /// The frame decision (Maciel's traversal when the policy asks for impostors and the model
@@ -237,7 +239,7 @@ impl Client {
             mode: s.mode,
             frames: s.frames,
             rx,
-            cache: ObjectCache::new(portico_client::cache::split_budget(s.cache_bytes).0),
+            holdings: Holdings::new(portico_client::cache::split_budget(s.cache_bytes).0),
             entries: HashMap::new(),
             decider: Decider::new(
                 match s.mode {
@@ -271,7 +273,9 @@ impl Client {
                     listed_at,
                 } => self.arrive(id, bytes, resident, listed_at),
                 Event::Answer(resp) => {
-                    resp.evict.iter().for_each(|&id| self.cache.demote(id));
+                    resp.evict
+                        .iter()
+                        .for_each(|&id| self.holdings.cache.demote(id));
                     let a = AnswerStat {
                         range_cells: resp.range_cells,
                         lookahead_objects: resp.lookahead_objects,
@@ -298,48 +302,45 @@ impl Client {
         r.latencies.push(listed_at.elapsed().as_secs_f64());
         r.bytes_fetched += bytes;
         r.segments_fetched += 1;
-        let head = self.parts.head(id);
-        if self.cache.contains(head) {
+        if self.holdings.has(self.parts.head(id)) {
             r.bytes_wasted += bytes; // fetched twice
             self.ledger.twice(bytes);
-            self.parts.forget(head);
+            self.holdings.piece_waits(&mut self.parts, id);
             return;
         }
         let (id, bytes, resident) = match self.parts.join(id, Vec::new()) {
             Joined::Whole(id, _) => (id, bytes, resident),
             Joined::Waiting => return,
             Joined::Complete(head, _) => {
-                self.parts.settle(head);
                 let wire = self.parts.group(head).map(|s| self.world.bytes(s)).sum();
                 (head, wire, self.world.decoded(head))
             }
         };
-        match self.cache.insert(id, (), resident) {
-            Ok(released) => {
-                for gone in released {
-                    if let Some((b, false)) = self.entries.remove(&gone) {
-                        r.bytes_wasted += b;
-                        self.ledger.unused(gone, b);
-                    }
-                }
-                self.entries.insert(id, (bytes, false));
+        let released = self.holdings.hold(&mut self.parts, id, (), resident);
+        for gone in released {
+            if let Some((b, false)) = self.entries.remove(&gone) {
+                r.bytes_wasted += b;
+                self.ledger.unused(gone, b);
             }
-            Err(_) => {
-                r.bytes_wasted += bytes;
-                self.ledger.unused(id, bytes);
-            }
+        }
+        if self.holdings.cache.contains(id) {
+            self.entries.insert(id, (bytes, false));
+        } else {
+            // Larger than the whole cache: held beside it (reported held, never drawn).
+            r.bytes_wasted += bytes;
+            self.ledger.unused(id, bytes);
         }
     }
 
     /// Visibility → candidates (capped at the size threshold) → elision over resident LODs,
     /// for path frame `p`.
-    fn frame(&mut self, p: usize) -> (FrameStat, Decision) {
+    fn frame(&mut self, p: usize) -> FrameStat {
         let w = self.world.clone();
         let scene = w.scene();
         let d = self.decider.decide(
             &scene,
             &w.frames[p].viewpoint,
-            &Held(&self.cache, &w),
+            &Held(&self.holdings.cache, &w),
             &self.cost,
             None,
         );
@@ -368,9 +369,7 @@ impl Client {
         if let Some(h) = &w.header.hierarchy {
             used.extend(d.box_textures(h));
         }
-        for &s in &d.touched {
-            self.cache.touch(s);
-        }
+        self.holdings.decided(&self.parts, &d, &scene);
 
         for s in used {
             if let Some(e) = self.entries.get_mut(&s) {
@@ -378,50 +377,39 @@ impl Client {
             }
             self.ledger.drew(&w.chains, s);
         }
-        (row, d)
+        row
     }
 
     /// What the IO task gets after frame `f` (path frame `p`).
-    fn publish(&mut self, p: usize, f: u64, d: &Decision) -> Ask {
+    fn publish(&mut self, p: usize, f: u64) -> Ask {
         let (wants, lacking) = match self.mode {
-            Mode::Prefetch(..) => (None, self.missing_now(d)),
-            Mode::Demand => (Some(self.demand_wants(d)), Vec::new()),
+            Mode::Prefetch(..) => (None, self.holdings.lacking.clone()),
+            Mode::Demand => (Some(self.demand_wants()), Vec::new()),
             Mode::Oracle { lookahead } => {
                 let left = self.frames.saturating_sub(f);
-                (
-                    Some(self.oracle_wants(p, lookahead.min(left), d)),
-                    Vec::new(),
-                )
+                (Some(self.oracle_wants(p, lookahead.min(left))), Vec::new())
             }
         };
         Ask {
             observer: self.world.frames[p].observer,
-            held: self.parts.holding(self.cache.ids()),
+            held: self.holdings.held(&self.parts),
             consumed: self.consumed,
             wants,
             lacking,
-            incomplete: d.frame.objects_skipped > 0,
+            incomplete: self.holdings.incomplete,
             at: Instant::now(),
         }
     }
 
-    /// What this frame lacked, most urgent first ([`portico_client::demand::lacking`]).
-    fn missing_now(&self, d: &Decision) -> Vec<u32> {
-        let scene = self.world.scene();
-        // A texture segment with parts: all of them but those that came.
-        self.parts
-            .expand(lacking(d, &scene, &|s| self.cache.contains(s)))
-    }
-
-    /// Demand fetch: exactly what this frame lacked.
-    fn demand_wants(&self, d: &Decision) -> Vec<u32> {
-        self.missing_now(d)
+    /// Demand fetch: exactly what this frame lacked (with the missing parts of textures).
+    fn demand_wants(&self) -> Vec<u32> {
+        self.holdings.lacking.clone()
     }
 
     /// The oracle: what this frame lacked, then what will be drawn in the next `k` frames,
     /// nearest first, up to the cache budget; what of it is resident moves to the head of the
     /// cache (nearest last, so headmost).
-    fn oracle_wants(&mut self, p: usize, k: u64, d: &Decision) -> Vec<u32> {
+    fn oracle_wants(&mut self, p: usize, k: u64) -> Vec<u32> {
         let w = self.world.clone();
         let n = w.path_frames();
         let mut window = Vec::new();
@@ -436,18 +424,17 @@ impl Client {
                     continue;
                 }
                 bytes += w.decoded(s);
-                if j > 0 && bytes > self.cache.budget() {
+                if j > 0 && bytes > self.holdings.cache.budget() {
                     break 'frames;
                 }
                 window.push(s);
             }
         }
         for &s in window.iter().rev() {
-            self.cache.touch(s);
+            self.holdings.cache.touch(s);
         }
-        let now = self.missing_now(d);
-        let ahead = window.into_iter().filter(|&s| !self.cache.contains(s));
-        ahead_of(&now, self.parts.expand(ahead))
+        let ahead = window.into_iter().filter(|&s| !self.holdings.has(s));
+        ahead_of(&self.holdings.lacking, self.parts.expand(ahead))
     }
 
     /// Counts what was never drawn among the segments still resident.
@@ -461,8 +448,8 @@ impl Client {
         }
         self.result.bytes_wasted += never;
         self.result.waste = self.ledger.waste(&self.world.chains);
-        self.result.cache_peak = self.cache.peak_bytes();
-        self.result.evictions = self.cache.evictions();
+        self.result.cache_peak = self.holdings.cache.peak_bytes();
+        self.result.evictions = self.holdings.cache.evictions();
         self.result
     }
 }
