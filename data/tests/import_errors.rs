@@ -161,3 +161,18 @@ fn extras_give_the_occluder_flag_and_scalar_tags_and_anything_else_is_ignored() 
         assert!(!i.occluder, "{extras}: not a boolean, not an occluder");
     }
 }
+
+#[test]
+fn a_glb_whose_header_declares_fewer_bytes_than_itself_is_refused_not_a_panic() {
+    // The `gltf` crate would subtract the header from the declared length unchecked.
+    for declared in [0u32, 11] {
+        let mut glb = b"glTF".to_vec();
+        glb.extend(2u32.to_le_bytes());
+        glb.extend(declared.to_le_bytes());
+        glb.extend([0; 64]);
+        let err = import_bytes(&glb, "glb").expect_err("a broken GLB");
+        assert!(err.contains(&format!("declares {declared} bytes")), "{err}");
+    }
+    let err = import_bytes(b"glTF\x02\x00\x00\x00\x10", "glb").expect_err("truncated");
+    assert!(err.contains("truncated"), "{err}");
+}

@@ -88,6 +88,20 @@ pub fn import_slice(
         );
     }
     let (json_bytes, blob) = if bytes.starts_with(b"glTF") {
+        // The `gltf` crate subtracts the 12-byte header from the declared length unchecked (a
+        // panic in debug builds, a wrapped length in release): checked here first.
+        let declared = bytes
+            .get(8..12)
+            .map(|l| u32::from_le_bytes([l[0], l[1], l[2], l[3]]));
+        match declared {
+            Some(n) if n >= 12 => {}
+            Some(n) => {
+                return Err(format!(
+                    "GLB container: header declares {n} bytes, less than the 12-byte header itself"
+                ));
+            }
+            None => return Err("GLB container: truncated inside its 12-byte header".into()),
+        }
         let glb = ::gltf::Glb::from_slice(bytes).map_err(|e| format!("GLB container: {e}"))?;
         (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
     } else {
