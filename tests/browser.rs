@@ -246,12 +246,9 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
     }
     let dir = tempfile::tempdir().unwrap();
     let tmp = dir.path().to_path_buf();
-    // Compressed geometry: the page decodes it (meshoptimizer's codecs, in Rust) on its thread.
-    let opts = portico_data::build::BuildOptions {
-        compress: true,
-        ..Default::default()
-    };
-    let db = build_tiny_with(dir.path(), &opts);
+    // Compressed geometry (the default): the page decodes it (meshoptimizer's codecs, in
+    // Rust) on its thread.
+    let db = build_tiny_with(dir.path(), &portico_data::build::BuildOptions::default());
     let compressed = {
         let d = portico_data::Database::open(&db).unwrap();
         d.segments()
