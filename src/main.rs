@@ -29,7 +29,7 @@ enum Command {
     Verify(cmd::verify::Args),
     /// Compare visibility culling methods over random views (Funkhouser Table 4.1).
     Cull(cmd::cull::Args),
-    /// Serve a display database over HTTP and WebSocket.
+    /// Serve a display database (or a model, built first and cached) over HTTP and WebSocket.
     Serve(cmd::serve::Args),
     /// Make a standard observer path (tour, spin, revisit) through a model's cells.
     Path(cmd::path::Args),

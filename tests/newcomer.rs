@@ -1,7 +1,8 @@
 //! What a newcomer meets first: every command's help lists the values it accepts and spells the
-//! output flag the same way; the mistakes of a first hour (serving a model instead of a
-//! database, walking with no server running) give one line that says what to do; the demo's
-//! report judges every figure against its target.
+//! output flag the same way; a model is served in one command, built once and again only when it
+//! changes; the mistakes of a first hour (inspecting a model instead of a database, walking with
+//! no server running) give one line that says what to do; the demo's report judges every figure
+//! against its target.
 
 use std::path::Path;
 use std::process::{Command, Output};
@@ -135,12 +136,87 @@ fn a_model_where_a_database_belongs_names_the_build_command() {
     bytes.extend_from_slice(&2u32.to_le_bytes());
     bytes.extend_from_slice(&[0; 64]);
     std::fs::write(&glb, bytes).expect("write");
-    for args in [vec!["serve", s(&glb)], vec!["inspect", s(&glb)]] {
-        let err = fails(&args);
-        assert!(err.contains("house.glb"), "{err}");
-        assert!(err.contains("GLB model"), "{err}");
-        assert!(err.contains("portico build"), "{err}");
+    let err = fails(&["inspect", s(&glb)]);
+    assert!(err.contains("house.glb"), "{err}");
+    assert!(err.contains("GLB model"), "{err}");
+    assert!(err.contains("portico build"), "{err}");
+    // Served, a model is built first: a broken one is one error naming it, and no server.
+    let err = fails(&["serve", s(&glb), "--listen", "127.0.0.1:0"]);
+    assert!(err.contains("house.glb"), "{err}");
+}
+
+/// Runs `portico serve MODEL` until it says where to open the viewer (or that it has none);
+/// returns what it said, then stops it.
+fn serve_until_listening(model: &Path) -> String {
+    use std::io::BufRead;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_portico"))
+        .args(["serve", s(model), "--listen", "127.0.0.1:0"])
+        .stderr(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .expect("run portico serve");
+    let mut said = String::new();
+    let mut lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
+    for line in lines.by_ref() {
+        let line = line.expect("stderr");
+        said.push_str(&line);
+        said.push('\n');
+        if line.contains("browser viewer") {
+            break;
+        }
     }
+    let _ = child.kill();
+    let _ = child.wait();
+    said
+}
+
+#[test]
+fn serving_a_model_builds_it_once_and_again_when_it_changes() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let glb = dir.path().join("house.glb");
+    let tiny = |seed| {
+        let params = portico_generator::Params {
+            preset: portico_generator::Preset::Tiny,
+            seed,
+            floors: None,
+        };
+        portico_generator::generate(&params, &mut |_| {})
+            .unwrap()
+            .glb
+    };
+    std::fs::write(&glb, tiny(1)).unwrap();
+    let cached = dir.path().join(".portico/house.glb.portico");
+    let first = serve_until_listening(&glb);
+    assert!(
+        first.contains("no cached build; building it into"),
+        "{first}"
+    );
+    assert!(first.contains("serving"), "{first}");
+    assert!(first.contains("http://127.0.0.1:"), "{first}");
+    assert!(cached.is_file(), "{first}");
+    let db = portico_data::Database::open(&cached).unwrap();
+    assert!(
+        db.segments()
+            .iter()
+            .any(|e| portico_data::codec::is_compressed(&db.segment(e.id).unwrap())),
+        "built compressed, as `portico build` does by default"
+    );
+    let built = std::fs::metadata(&cached).unwrap().modified().unwrap();
+    // Unchanged: served from the cache, not built again.
+    let second = serve_until_listening(&glb);
+    assert!(second.contains("unchanged, serving its build"), "{second}");
+    assert!(!second.contains("building"), "{second}");
+    assert_eq!(
+        std::fs::metadata(&cached).unwrap().modified().unwrap(),
+        built
+    );
+    // Another building in the same file: built again.
+    std::fs::write(&glb, tiny(2)).unwrap();
+    let third = serve_until_listening(&glb);
+    assert!(
+        third.contains("the model changed since the cached build; building it"),
+        "{third}"
+    );
 }
 
 #[test]

@@ -1,4 +1,4 @@
-//! `portico build MODEL... -o FILE.portico [--units UNIT] [--up AXIS] [--flatten] [--compress]
+//! `portico build MODEL... -o FILE.portico [--units UNIT] [--up AXIS] [--flatten] [--no-compress]
 //! [--threads N]`
 
 use crate::cmd::values;
@@ -10,7 +10,7 @@ use portico_data::hierarchy::ImpostorPainter;
 use portico_data::import::frame::FrameOptions;
 use portico_data::import::import_file_with;
 use portico_render::impostor::Painter;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// Arguments of `portico build`.
@@ -38,9 +38,13 @@ pub struct Args {
     /// Store every instance's geometry separately with baked lighting (large: the out-of-core case).
     #[arg(long)]
     flatten: bool,
-    /// Quantise and meshopt-encode every geometry segment (16-bit positions in each segment's
-    /// bounds; normals and colours exact): fewer bytes on the wire, decoded by the client.
+    /// Store geometry plain (44.8 bytes per triangle on flattened `mega`) instead of quantised,
+    /// meshopt-encoded and deflated (the default: 7.9; 16-bit positions in each segment's
+    /// bounds, normals and colours exact, decoded by the client).
     #[arg(long)]
+    no_compress: bool,
+    /// Compressed geometry: the default, accepted for older scripts.
+    #[arg(long, hide = true, conflicts_with = "no_compress")]
     compress: bool,
     /// Most KiB of a texture segment on the wire (default 64: about 52 ms at 10 Mbit/s); a
     /// longer one is cut into parts the client joins. Smaller for slower links (at least 1).
@@ -72,14 +76,35 @@ pub fn run(a: Args) -> Result<()> {
             .build_global()
             .context("setting up worker threads")?;
     }
-    let t0 = Instant::now();
-    let mut model = portico_data::model::Model::default();
-    let options = FrameOptions {
+    let frame = FrameOptions {
         units: a.units,
         up: a.up,
     };
-    for path in &a.models {
-        let m = import_file_with(path, &options)?;
+    let opts = BuildOptions {
+        flatten: a.flatten,
+        compress: !a.no_compress,
+        name: a.name,
+        no_cells: a.no_cells,
+        no_hierarchy: a.no_hierarchy,
+        part_bytes: a.part_kb.map(|k| (k as usize) << 10),
+    };
+    build_files(&a.models, &a.output, &frame, &opts, a.no_textures)
+}
+
+/// Imports `models` (in `frame`'s units and up axis where given), builds them into `output`
+/// with `opts` (average-colour impostor boxes only when `no_textures`), with progress bars, and
+/// prints what it found and a summary. Errors: a model that does not import, the build's.
+pub fn build_files(
+    models: &[PathBuf],
+    output: &Path,
+    frame: &FrameOptions,
+    opts: &BuildOptions,
+    no_textures: bool,
+) -> Result<()> {
+    let t0 = Instant::now();
+    let mut model = portico_data::model::Model::default();
+    for path in models {
+        let m = import_file_with(path, frame)?;
         for w in &m.warnings {
             eprintln!("warning: {}: {w}", path.display());
         }
@@ -92,19 +117,11 @@ pub fn run(a: Args) -> Result<()> {
     let names: Vec<String> = model.instances.iter().map(|i| i.name.clone()).collect();
     let import_time = t0.elapsed();
     let bars = Bars::new();
-    let opts = BuildOptions {
-        flatten: a.flatten,
-        compress: a.compress,
-        name: a.name,
-        no_cells: a.no_cells,
-        no_hierarchy: a.no_hierarchy,
-        part_bytes: a.part_kb.map(|k| (k as usize) << 10),
-    };
-    let mut painter = painter(a.no_hierarchy || a.no_textures);
+    let mut painter = painter(opts.no_hierarchy || no_textures);
     let report = build_with(
         model,
-        &a.output,
-        &opts,
+        output,
+        opts,
         &bars,
         painter.as_mut().map(|p| p as &mut dyn ImpostorPainter),
     )?;
@@ -125,7 +142,7 @@ pub fn run(a: Args) -> Result<()> {
             origin[0], origin[1], origin[2]
         );
     }
-    if !a.no_hierarchy {
+    if !opts.no_hierarchy {
         eprintln!(
             "impostors: {} in {:.2} s",
             if painter.is_some() {

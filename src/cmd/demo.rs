@@ -1,4 +1,4 @@
-//! `portico demo [--preset small] [--out DIR]`: the whole system in one command.
+//! `portico demo [--preset small] [--out DIR] [--serve]`: the whole system in one command.
 //!
 //! Generates a furnished building, builds its display database, serves it on a free loopback
 //! port in this process, walks a tour through it with the real headless client, runs a short
@@ -68,6 +68,9 @@ pub struct Args {
     /// Frames each simulated client plays.
     #[arg(long, default_value_t = 300)]
     loadtest_frames: u64,
+    /// Then serve the building with the browser viewer (as `portico serve`) until Ctrl-C.
+    #[arg(long)]
+    serve: bool,
 }
 
 /// Timings of the demo's steps.
@@ -173,6 +176,21 @@ pub fn run(a: Args) -> Result<()> {
             eprintln!("  {}", out.join(f).display());
         }
     }
+    if a.serve {
+        eprintln!();
+        return crate::cmd::serve::run(crate::cmd::serve::Args::for_file(&db_path));
+    }
+    let viewer = crate::cmd::serve::viewer_dir(None).ok().flatten();
+    eprintln!(
+        "\nWalk it in a browser: `portico serve {}`{}, then open http://127.0.0.1:7878/ \
+         (or run the demo with --serve).",
+        db_path.display(),
+        if viewer.is_some() {
+            ""
+        } else {
+            " (after `bash web/build.sh`, which builds the viewer)"
+        }
+    );
     Ok(())
 }
 

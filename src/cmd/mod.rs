@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod build;
+pub mod built;
 pub mod cull;
 pub mod demo;
 pub mod generate;

@@ -1,4 +1,5 @@
-//! `portico serve FILE.portico [--listen ADDR] [--token T] [limits]`: the streaming server.
+//! `portico serve FILE.portico|MODEL [--listen ADDR] [--token T] [limits]`: the streaming server
+//! (a model file is built first, into a cache reused while it is unchanged: [`super::built`]).
 //! Binds to loopback unless told otherwise; on Ctrl-C or SIGTERM stops accepting and drains for
 //! at most 10 s; on SIGHUP reopens the file (a rebuild renamed a new file over it) and serves it
 //! to new connections at once, while the old connections finish on the old map (valid until its
@@ -15,7 +16,9 @@ use std::time::Duration;
 #[derive(clap::Args)]
 pub struct Args {
     /// The display database (memory-mapped read-only; replace it by renaming a new file over it
-    /// and sending SIGHUP or restarting, never by writing into it).
+    /// and sending SIGHUP or restarting, never by writing into it), or a model (.glb, .gltf,
+    /// .obj, .ifc) to build with `portico build`'s defaults into a cache beside it (reused
+    /// while the model and the files beside it are unchanged) and serve.
     file: PathBuf,
     /// Address to listen on.
     #[arg(long, default_value = "127.0.0.1:7878")]
@@ -58,10 +61,23 @@ pub struct Args {
     drain_secs: u64,
 }
 
+impl Args {
+    /// `portico serve FILE` with every other argument at its default (and the token from
+    /// `PORTICO_TOKEN`, if set).
+    pub fn for_file(file: &std::path::Path) -> Args {
+        #[derive(clap::Parser)]
+        struct One {
+            #[command(flatten)]
+            a: Args,
+        }
+        <One as clap::Parser>::parse_from([std::ffi::OsStr::new("serve"), file.as_os_str()]).a
+    }
+}
+
 /// The viewer folder: the one given (which must hold a built viewer), else `target/viewer`
 /// under the current folder (a checkout), else next to the binary's folder
 /// (`target/release/portico` → `target/viewer`).
-fn viewer_dir(given: Option<PathBuf>) -> Result<Option<PathBuf>> {
+pub(crate) fn viewer_dir(given: Option<PathBuf>) -> Result<Option<PathBuf>> {
     if let Some(d) = given {
         if !portico_server::viewer_is_built(&d) {
             anyhow::bail!(
@@ -81,7 +97,10 @@ fn viewer_dir(given: Option<PathBuf>) -> Result<Option<PathBuf>> {
 }
 
 /// Opens the database and serves until interrupted.
-pub fn run(a: Args) -> Result<()> {
+pub fn run(mut a: Args) -> Result<()> {
+    if super::built::is_model(&a.file) {
+        a.file = super::built::database_for(&a.file)?;
+    }
     let config = Config {
         token: a.token.filter(|t| !t.is_empty()),
         max_sessions: a.max_sessions.max(1),
@@ -110,7 +129,11 @@ pub fn run(a: Args) -> Result<()> {
     let addr = listener.local_addr()?;
     announce(&state, addr);
     match &config.viewer {
-        Some(d) => eprintln!("browser viewer (from {}): open http://{addr}/", d.display()),
+        Some(d) => eprintln!(
+            "browser viewer (from {}): open {}",
+            d.display(),
+            page_url(addr, config.token.is_some())
+        ),
         None => eprintln!("no browser viewer at / (build it with `bash web/build.sh`)"),
     }
     if !config.shared_answers {
@@ -167,6 +190,20 @@ pub fn run(a: Args) -> Result<()> {
     })?;
     eprintln!("stopped");
     Ok(())
+}
+
+/// The viewer's address for a browser on this machine (a server listening on every interface
+/// is opened on loopback), with the token's place when the server wants one.
+fn page_url(addr: SocketAddr, token: bool) -> String {
+    let mut addr = addr;
+    if addr.ip().is_unspecified() {
+        addr.set_ip(std::net::Ipv4Addr::LOCALHOST.into());
+    }
+    if token {
+        format!("http://{addr}/?token=TOKEN (TOKEN: the one given with --token)")
+    } else {
+        format!("http://{addr}/")
+    }
 }
 
 /// Says what is served where.
