@@ -1,8 +1,10 @@
-//! The README's commands run as written: every `portico …` command in its shell blocks, its
-//! prose and its Performance table is given to the real binary's argument parser (with
-//! `--help` at the end, so nothing runs but every flag and value before it is checked), and
-//! must carry every option the usage line marks as required. A renamed flag, a missing `-o` where one is
-//! required, or a value the command does not accept fails here.
+//! The README's commands run as written, and those of the documents it links in `docs/`: every
+//! `portico …` command in their shell blocks, their prose and the Performance tables is given to
+//! the real binary's argument parser (with `--help` at the end, so nothing runs but every flag
+//! and value before it is checked), and must carry every option the usage line marks as
+//! required. A renamed flag, a missing `-o` where one is required, or a value the command does
+//! not accept fails here. The README stays a guide a newcomer reads in five minutes: at most
+//! [`README_LINES`] lines, and every document it links exists.
 //!
 //! Placeholders are filled the way a reader would: `…` after `--server` is the default URL,
 //! `a\|b` takes the first choice, `[...]` optional parts are left out.
@@ -11,13 +13,42 @@ use std::process::Command;
 
 const README: &str = include_str!("../README.md");
 
-/// Every `portico …` command the README asks a reader to type: lines of its fenced shell
-/// blocks, code spans in its prose and in the Performance table, as argument vectors (without
-/// `portico`).
+/// The README and the documents in `docs/`, by name.
+const DOCS: [(&str, &str); 9] = [
+    ("README.md", README),
+    ("docs/models.md", include_str!("../docs/models.md")),
+    ("docs/browser.md", include_str!("../docs/browser.md")),
+    ("docs/commands.md", include_str!("../docs/commands.md")),
+    (
+        "docs/how-it-works.md",
+        include_str!("../docs/how-it-works.md"),
+    ),
+    ("docs/api.md", include_str!("../docs/api.md")),
+    ("docs/deployment.md", include_str!("../docs/deployment.md")),
+    (
+        "docs/performance.md",
+        include_str!("../docs/performance.md"),
+    ),
+    ("docs/status.md", include_str!("../docs/status.md")),
+];
+
+/// The most lines the README may have.
+const README_LINES: usize = 200;
+
+/// Every `portico …` command the documents ask a reader to type.
 fn commands() -> Vec<Vec<String>> {
+    DOCS.iter()
+        .flat_map(|(name, text)| commands_in(text, *name == "docs/performance.md"))
+        .collect()
+}
+
+/// Every `portico …` command `doc` asks a reader to type: lines of its fenced shell blocks, code
+/// spans in its prose and in its Performance table (the whole document's tables when
+/// `performance`), as argument vectors (without `portico`).
+fn commands_in(doc: &str, performance: bool) -> Vec<Vec<String>> {
     let mut out = Vec::new();
     let mut in_block = false;
-    let mut in_performance = false;
+    let mut in_performance = performance;
     // Prose is taken a paragraph at a time: a code span may run over a line break.
     let mut paragraph = String::new();
     let spans = |text: &str, out: &mut Vec<Vec<String>>| {
@@ -25,7 +56,7 @@ fn commands() -> Vec<Vec<String>> {
             out.extend(portico_args(span));
         }
     };
-    for line in README.lines() {
+    for line in doc.lines() {
         let prose = !in_block
             && !line.starts_with("```")
             && !line.starts_with('|')
@@ -43,7 +74,7 @@ fn commands() -> Vec<Vec<String>> {
         } else if in_block {
             let line = line.split(" #").next().unwrap_or_default();
             out.extend(portico_args(line));
-        } else if line.starts_with("## ") {
+        } else if line.starts_with("## ") && !performance {
             in_performance = line == "## Performance";
         } else if in_performance && line.starts_with('|') {
             // The Performance table's rows (the command table's synopses, with their
@@ -169,6 +200,44 @@ fn required(help: &str) -> Vec<(String, Option<String>)> {
             (long.to_string(), short)
         })
         .collect()
+}
+
+#[test]
+fn the_readme_is_short_and_its_documents_exist() {
+    let lines = README.lines().count();
+    assert!(
+        lines <= README_LINES,
+        "the README has {lines} lines (at most {README_LINES}: the rest goes to docs/)"
+    );
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut linked = 0;
+    for (name, text) in DOCS {
+        let dir = std::path::Path::new(name)
+            .parent()
+            .unwrap_or(std::path::Path::new(""));
+        for target in text.split("](").skip(1).filter_map(|t| t.split(')').next()) {
+            if target.starts_with("http") || target.starts_with('#') {
+                continue;
+            }
+            let path = root
+                .join(dir)
+                .join(target.split('#').next().unwrap_or(target));
+            assert!(path.exists(), "{name} links {target}, which does not exist");
+            linked += 1;
+        }
+    }
+    // Every document in `docs/` is one of DOCS, so its commands are checked too.
+    for e in std::fs::read_dir(root.join("docs")).unwrap() {
+        let p = e.unwrap().path();
+        if p.extension().is_some_and(|x| x == "md") {
+            let name = format!("docs/{}", p.file_name().unwrap().to_string_lossy());
+            assert!(
+                DOCS.iter().any(|(n, _)| *n == name),
+                "{name} is not checked here: add it to DOCS"
+            );
+        }
+    }
+    assert!(linked >= DOCS.len(), "only {linked} links followed");
 }
 
 #[test]
