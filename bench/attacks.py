@@ -23,7 +23,7 @@ Attacks (each for --seconds, one after the other):
   evicted-flood 2 WebSocket clients send ~0.9 MB Evicted lists as fast as the server takes them
 For each: /healthz latency (p50, p99, max; a request that fails counts as 5 s) polled every 20 ms
 on fresh connections from its own thread, and the server's RSS (VmRSS) at the end.
-Standard library only; figures in the README come from this script.
+Standard library only; figures in docs/performance.md come from this script.
 """
 import argparse, base64, json, os, signal, socket, struct, threading, time
 from urllib.parse import urlparse

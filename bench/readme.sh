@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
-# The README's Performance figures for `soda`, by the commands written in its table, in order.
+# The Performance figures for `soda` (docs/performance.md), by the commands written in its table, in order.
 #
 #   bench/readme.sh [DIR] [--sweep] [--mega]
 #
 # DIR (default readme-figures/) receives the models and every command's output; each step
 # prints its command and wall time. The policy sweep (about 5 minutes) and `mega` (about
 # 10 minutes) run only when asked. Needs a release build (`cargo build --release`) and curl;
-# uses port 7878 as the README does. About 15 minutes on 2 cores without the options.
+# uses port 7878 as the documents do. About 15 minutes on 2 cores without the options.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 bin=${PORTICO:-$root/target/release/portico}
@@ -32,7 +32,7 @@ stop() {
   server=
 }
 trap stop EXIT
-# `portico serve F` in the background, on the README's port; returns once /healthz answers.
+# `portico serve F` in the background, on the documents' port; returns once /healthz answers.
 # (Started directly, not through a function or subshell: $! must be the server's pid.)
 serve() {
   stop
@@ -123,4 +123,4 @@ if [ -n "$mega" ]; then
   stop
 fi
 echo
-echo "== done: every command above is the README's; outputs in $PWD"
+echo "== done: every command above is docs/performance.md's; outputs in $PWD"

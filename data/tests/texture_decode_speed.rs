@@ -1,5 +1,5 @@
 //! How fast a client decodes texture segments and re-codes them as BC blocks, and what picture
-//! the GPU then samples (the README's figures). Measurements, not timed tests: run them by
+//! the GPU then samples (docs/performance.md's figures). Measurements, not timed tests: run them by
 //! hand in release,
 //! `PORTICO_DB=soda.tex.portico cargo test --release -p portico-data --test texture_decode_speed -- --ignored --nocapture`
 //! (add `PORTICO_MODEL=soda.tex.glb`, the model it was built from, for the PSNR of what the GPU

@@ -47,7 +47,7 @@ impl Database {
         let file = File::open(path).map_err(|e| DataError::io(path, e))?;
         // SAFETY: the map is read-only and Portico never modifies a served file in place (a
         // rebuild renames a new file over it). Another process truncating the file would be a
-        // SIGBUS, which the README warns about; nothing in this process writes to it.
+        // SIGBUS, which docs/how-it-works.md warns about; nothing in this process writes to it.
         #[allow(unsafe_code)]
         let map = unsafe { memmap2::Mmap::map(&file) }.map_err(|e| DataError::io(path, e))?;
         Self::from_bytes(path, Bytes::from_owner(map))

@@ -340,7 +340,7 @@ fn need(segment: u32, kind: NeedKind, lod: u8, bytes: u64, frames: u32) -> NeedI
 /// Funkhouser orders the whole read set by LOD, then frames: with a cold cache that reads the
 /// coarsest LOD of every object seen from anywhere in the range cells (hundreds) before the
 /// next LOD of the one in front of the observer. Reading the view's objects first keeps his
-/// guarantee and serves the current frame first (measured in the README: fewer LODs skipped
+/// guarantee and serves the current frame first (measured in docs/performance.md: fewer LODs skipped
 /// while the cache warms up, the same once it is warm).
 #[derive(Debug, Clone, Default)]
 pub struct NeedList {
