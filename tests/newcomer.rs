@@ -214,7 +214,7 @@ fn serving_a_model_builds_it_once_and_again_when_it_changes() {
     std::fs::write(&glb, tiny(2)).unwrap();
     let third = serve_until_listening(&glb);
     assert!(
-        third.contains("the model changed since the cached build; building it"),
+        third.contains("the model or a file beside it changed since the cached build; building it"),
         "{third}"
     );
 }

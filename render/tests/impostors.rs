@@ -140,11 +140,7 @@ fn a_textured_box_seen_from_a_capture_direction_matches_its_objects() {
             let inst = &header.instances[i as usize];
             let lod = header.lods_of(inst)[0];
             let color = [1.0f32; 4];
-            (
-                r.upload(&db.segment(lod.segment).unwrap()).unwrap(),
-                inst,
-                color,
-            )
+            (r.upload(&db.geometry(&lod).unwrap()).unwrap(), inst, color)
         })
         .collect();
     for face in 0usize..6 {

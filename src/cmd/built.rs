@@ -45,7 +45,7 @@ pub fn database_for(model: &Path) -> Result<PathBuf> {
     let had = std::fs::read_to_string(&stamp_path).ok();
     let why = match had {
         None => "no cached build",
-        Some(s) if s != want => "the model changed since the cached build",
+        Some(s) if s != want => "the model or a file beside it changed since the cached build",
         Some(_) => match portico_data::Database::open(&db) {
             Ok(_) => {
                 eprintln!(

@@ -181,8 +181,12 @@ pub fn run(a: Args) -> Result<()> {
         return crate::cmd::serve::run(crate::cmd::serve::Args::for_file(&db_path));
     }
     let viewer = crate::cmd::serve::viewer_dir(None).ok().flatten();
+    // The binary as it was run (a newcomer ran `cargo run`: `portico` is not on the PATH yet).
+    let exe = std::env::current_exe()
+        .map(|e| e.display().to_string())
+        .unwrap_or_else(|_| "portico".into());
     eprintln!(
-        "\nWalk it in a browser: `portico serve {}`{}, then open http://127.0.0.1:7878/ \
+        "\nWalk it in a browser: `{exe} serve {}`{}, then open http://127.0.0.1:7878/ \
          (or run the demo with --serve).",
         db_path.display(),
         if viewer.is_some() {

@@ -123,8 +123,14 @@ pub fn run(mut a: Args) -> Result<()> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    let listener = std::net::TcpListener::bind(a.listen)
-        .with_context(|| format!("cannot listen on {}", a.listen))?;
+    let listener = std::net::TcpListener::bind(a.listen).with_context(|| {
+        let mut other = a.listen;
+        other.set_port(a.listen.port().wrapping_add(1).max(1));
+        format!(
+            "cannot listen on {} (another server there? give another port: --listen {other})",
+            a.listen
+        )
+    })?;
     listener.set_nonblocking(true)?;
     let addr = listener.local_addr()?;
     announce(&state, addr);
@@ -134,7 +140,10 @@ pub fn run(mut a: Args) -> Result<()> {
             d.display(),
             page_url(addr, config.token.is_some())
         ),
-        None => eprintln!("no browser viewer at / (build it with `bash web/build.sh`)"),
+        None => eprintln!(
+            "no browser viewer at / (build it with `bash web/build.sh` in Portico's checkout, then \
+             serve from there or give its target/viewer folder with --viewer DIR)"
+        ),
     }
     if !config.shared_answers {
         eprintln!("stream sessions: exact answers (every observer its own need list, not shared)");

@@ -12,7 +12,7 @@ use portico_server::{AppState, Config};
 use std::path::PathBuf;
 use std::sync::{Arc, OnceLock};
 
-/// The tiny building's database, built once per test binary.
+/// The tiny building's database (plain geometry), built once per test binary.
 pub fn db_path() -> &'static PathBuf {
     static PATH: OnceLock<PathBuf> = OnceLock::new();
     PATH.get_or_init(|| {
@@ -26,13 +26,13 @@ pub fn db_path() -> &'static PathBuf {
         let glb = dir.join("tiny.glb");
         std::fs::write(&glb, &b.glb).unwrap();
         let out = dir.join("tiny.portico");
-        build(
-            import_file(&glb).unwrap(),
-            &out,
-            &BuildOptions::default(),
-            &Quiet,
-        )
-        .unwrap();
+        // Plain geometry: the pacing tests need answers larger than a compressed tiny building's
+        // (31 KB); the server sends either kind's bytes as they are.
+        let opts = BuildOptions {
+            compress: false,
+            ..BuildOptions::default()
+        };
+        build(import_file(&glb).unwrap(), &out, &opts, &Quiet).unwrap();
         out
     })
 }
@@ -52,9 +52,12 @@ pub fn big_db_path() -> &'static PathBuf {
         let glb = dir.join("small.glb");
         std::fs::write(&glb, &b.glb).unwrap();
         let out = dir.join("small.portico");
+        // Plain geometry: compressed, the segments would be a fifth as large, and fit in the
+        // socket buffers the slow-reader tests must overflow.
         let opts = BuildOptions {
             flatten: true,
             no_hierarchy: true,
+            compress: false,
             ..BuildOptions::default()
         };
         build(import_file(&glb).unwrap(), &out, &opts, &Quiet).unwrap();
