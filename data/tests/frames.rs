@@ -94,7 +94,12 @@ fn within(a: f32, b: f32, share: f32) -> bool {
 fn the_house_in_centimetres_or_z_up_walks_like_the_house_in_metres() {
     let reference = build_model(import_file(&case("units/house-m.obj")).unwrap());
     let (secs, metres) = extent(&reference.tour());
-    assert!((20.0..40.0).contains(&secs), "the reference tour: {secs} s");
+    // At a person's pace in metres: 28 s when the tour turned in the middle of each room, 65 s
+    // now that it walks round them; in centimetres read as metres it lasted 657 s.
+    assert!(
+        (20.0..120.0).contains(&secs),
+        "the reference tour: {secs} s"
+    );
     let frame = &reference.model.frames[0];
     assert_eq!((frame.unit, frame.up), (LengthUnit::Metre, UpAxis::Y));
     for (name, unit, up) in [

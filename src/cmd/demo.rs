@@ -14,7 +14,7 @@ use portico_client::policy::policy_spec;
 use portico_data::Database;
 use portico_data::build::{BuildOptions, build_with};
 use portico_data::import::import_file;
-use portico_data::path::{CameraPath, PathKind, generate};
+use portico_data::path::{CameraPath, PathKind, generate_around};
 use portico_generator::{Params, Preset};
 use portico_lab::loadtest::{
     Link, LoadtestConfig, LoadtestSummary, Transport, run as run_loadtest,
@@ -234,8 +234,10 @@ fn build_database(glb: &Path, db: &Path) -> Result<()> {
 fn tour(db: &Path, a: &Args, out: &Path) -> Result<CameraPath> {
     let db = Database::open(db)?;
     let graph = db.cell_graph()?.context("the demo building has no cells")?;
-    let p = generate(
+    let objects: Vec<_> = db.header().instances.iter().map(|i| i.bounds).collect();
+    let p = generate_around(
         &graph,
+        &objects,
         PathKind::Tour,
         a.legs,
         a.seed,

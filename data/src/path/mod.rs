@@ -1,15 +1,18 @@
 //! Observer paths: timed keyframes (eye, view direction) that walkthroughs and benchmarks replay
 //! frame by frame (Funkhouser §7 replays recorded paths), and generators for standard paths:
-//! tours between the rooms of a building's cells, and, for models without rooms, an orbit and a
+//! tours between the rooms of a building's cells, walked looking ahead as a person does
+//! ([`gaze`]), and, for models without rooms, an orbit and a
 //! fly-through ([`survey`]).
 //!
 //! On disk a path is JSON: `{"kind": "tour", "keyframes": [{"t": 0.0, "eye": [x, y, z],
 //! "dir": [x, y, z]}, ...]}`, times in seconds, increasing; positions in the model's metres.
 
+pub mod detour;
+pub mod gaze;
 mod rooms;
 pub mod survey;
 
-use rooms::roomy;
+use rooms::{DOOR_APPROACH_M, room_loop, roomy};
 pub use rooms::{EYE_HEIGHT, has_rooms, walkable};
 
 use crate::cells::CellGraph;
@@ -82,7 +85,7 @@ pub fn standard(
             survey::flythrough(bounds, objects, speed),
             std::f32::consts::PI / turn.max(0.01),
         )),
-        (_, Some(g)) => generate(g, kind, legs, seed, speed, turn),
+        (_, Some(g)) => generate_around(g, objects, kind, legs, seed, speed, turn),
     }
 }
 
@@ -143,9 +146,43 @@ impl CameraPath {
 }
 
 /// Makes a standard path through the live cells of `graph`, walking at `speed` m/s and turning
-/// at most `turn` rad/s.
+/// at most `turn` rad/s, looking along the direction of travel and turning on the spot at
+/// corners. A tour here crosses each room it visits to its middle and turns there: the load
+/// tests' and benchmarks' path, on which their figures were measured. [`generate_around`]
+/// walks as a visitor does.
 pub fn generate(
     graph: &CellGraph,
+    kind: PathKind,
+    legs: usize,
+    seed: u64,
+    speed: f32,
+    turn: f32,
+) -> Option<CameraPath> {
+    make(graph, None, kind, legs, seed, speed, turn)
+}
+
+/// [`generate`] as a visitor walks: looking ahead along the way ([`gaze`]), round each room
+/// visited, along its walls (not to its middle to turn there, facing the wall beside them),
+/// and round `objects` (world boxes; the
+/// model's instances) where they stand in the way ([`detour`]). The tour of `portico demo`,
+/// `portico path`, the server's `/v1/tour` and the browser.
+#[allow(clippy::too_many_arguments)]
+pub fn generate_around(
+    graph: &CellGraph,
+    objects: &[Aabb],
+    kind: PathKind,
+    legs: usize,
+    seed: u64,
+    speed: f32,
+    turn: f32,
+) -> Option<CameraPath> {
+    make(graph, Some(objects), kind, legs, seed, speed, turn)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn make(
+    graph: &CellGraph,
+    visitor: Option<&[Aabb]>,
     kind: PathKind,
     legs: usize,
     seed: u64,
@@ -165,11 +202,14 @@ pub fn generate(
     }
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let (kind_name, points) = match kind {
-        PathKind::Tour => ("tour", tour_points(graph, &live, legs, &mut rng)),
+        PathKind::Tour => {
+            let p = tour_points(graph, &live, legs, visitor.is_some(), &mut rng);
+            ("tour", p)
+        }
         PathKind::Orbit => return Some(survey::orbit(&graph.bounds, speed)),
         PathKind::Flythrough => return Some(survey::flythrough(&graph.bounds, &[], speed)),
         PathKind::Revisit => {
-            let mut p = tour_points(graph, &live, legs.div_ceil(2), &mut rng);
+            let mut p = tour_points(graph, &live, legs.div_ceil(2), visitor.is_some(), &mut rng);
             let back: Vec<Vec3> = p.iter().rev().skip(1).copied().collect();
             p.extend(back);
             ("revisit", p)
@@ -179,14 +219,28 @@ pub fn generate(
             return Some(spin(graph.cells[c as usize].bounds.center(), turn));
         }
     };
-    Some(timed(kind_name, &points, speed.max(0.01), turn.max(0.01)))
+    Some(match visitor {
+        Some(objects) => gaze::walk(
+            kind_name,
+            &detour::round_objects(graph, objects, &points),
+            speed.max(0.01),
+            turn.max(0.01),
+        ),
+        None => gaze::along_travel(kind_name, &points, speed.max(0.01), turn.max(0.01)),
+    })
 }
 
 /// Random rooms joined by their shortest portal chains. Where the building can be walked
 /// (through doors and stair holes, never out and back in through a window: [`walkable`]), the
 /// tour keeps to the rooms so reached and crosses each door at eye height; otherwise it takes
 /// any chain, through portal centres.
-fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rng) -> Vec<Vec3> {
+fn tour_points(
+    graph: &CellGraph,
+    live: &[u32],
+    legs: usize,
+    round_rooms: bool,
+    rng: &mut ChaCha8Rng,
+) -> Vec<Vec3> {
     let walk: Vec<bool> = (0..graph.portals.len() as u32)
         .map(|p| walkable(graph, p))
         .collect();
@@ -255,10 +309,12 @@ fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rn
         let Some(chain) = portal_chain_by(graph, at, target, through) else {
             continue;
         };
-        // Walk straight through each opening: a point a little before it in the cell left and
-        // a little after it in the cell entered, each kept inside its cell. Consecutive points
-        // then share a cell, which is convex: the path never leaves the live cells, and the
-        // observer turns inside rooms, never standing in a portal's plane.
+        // Walk straight through each opening: a point before it in the cell left and one after
+        // it in the cell entered, on the line through its centre across it (a visitor lines up
+        // a metre out, so the last steps to a door run square to its wall, beside a door leaf
+        // open against it, not through it), each kept inside its cell. Consecutive points then share a cell, which is
+        // convex: the path never leaves the live cells, and the observer turns inside rooms,
+        // never standing in a portal's plane.
         let mut cell = at;
         for &p in &chain {
             let portal = &graph.portals[p as usize];
@@ -271,7 +327,12 @@ fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rn
             let mut n = Vec3::ZERO;
             n[a] = (there.center()[a] - here.center()[a]).signum();
             let c = portal.rect.center();
-            let (mut before, mut after) = (within(here, c - n * 0.4), within(there, c + n * 0.4));
+            let approach = if round_rooms { DOOR_APPROACH_M } else { 0.4 };
+            let depth = |b: &Aabb| (0.45 * (b.max[a] - b.min[a])).min(approach);
+            let (mut before, mut after) = (
+                within(here, c - n * depth(here)),
+                within(there, c + n * depth(there)),
+            );
             if walking && a == 1 {
                 // Up or down a stair's hole: standing on each side's floor.
                 before.y = stand(cell).y.clamp(here.min[1], here.max[1]);
@@ -283,10 +344,40 @@ fn tour_points(graph: &CellGraph, live: &[u32], legs: usize, rng: &mut ChaCha8Rn
                 before.y = y.clamp(here.min[1], here.max[1]);
                 after.y = y.clamp(there.min[1], there.max[1]);
             }
-            points.extend([before, after]);
+            // Through a cell thinner than the two approaches (a door's own cell in a thick
+            // wall), the point after the last opening would lie beyond the point before the
+            // next one: the walk would step back. A visitor's walk takes the point between
+            // them (the benchmarks' path keeps the step, as it was measured).
+            let n_before = points.len();
+            if round_rooms && n_before >= 2 && cell != at {
+                let last = points[n_before - 1];
+                if (before - last).dot(n) < 0.0 {
+                    let mid = (before + last) * 0.5;
+                    points[n_before - 1] = mid;
+                    before = mid;
+                }
+            }
+            if points.last() != Some(&before) {
+                points.push(before);
+            }
+            points.push(after);
             cell = next;
         }
-        points.push(stand(target));
+        match (walking && round_rooms)
+            .then(|| {
+                room_loop(
+                    &graph.cells[target as usize].bounds,
+                    points.last().copied(),
+                    stand(target).y,
+                )
+            })
+            .flatten()
+        {
+            // Look round the room, walking along its walls (a turn on the spot in a room's
+            // middle would look at the wall beside it).
+            Some(round) => points.extend(round),
+            None => points.push(stand(target)),
+        }
         at = target;
     }
     points
@@ -311,54 +402,6 @@ fn biggest_cell(graph: &CellGraph, live: &[u32]) -> u32 {
         .copied()
         .max_by(|&a, &b| volume(a).total_cmp(&volume(b)))
         .unwrap_or(live[0])
-}
-
-/// Keyframes along the points at `speed`, looking along the horizontal direction of travel,
-/// pausing at corners long enough to turn at `turn` rad/s.
-fn timed(kind: &str, points: &[Vec3], speed: f32, turn: f32) -> CameraPath {
-    let mut keyframes = Vec::new();
-    let mut t = 0.0f32;
-    let mut dir = Vec3::X;
-    for w in points.windows(2) {
-        let step = w[1] - w[0];
-        let flat = Vec3::new(step.x, 0.0, step.z);
-        let new_dir = if flat.length() > 1e-3 {
-            flat.normalize()
-        } else {
-            dir
-        };
-        if keyframes.is_empty() {
-            dir = new_dir;
-        }
-        // Turn on the spot, then walk.
-        let angle = dir.angle_between(new_dir);
-        if angle > 1e-3 || keyframes.is_empty() {
-            keyframes.push(Keyframe {
-                t,
-                eye: w[0].into(),
-                dir: dir.into(),
-            });
-            t += angle / turn;
-            dir = new_dir;
-        }
-        keyframes.push(Keyframe {
-            t,
-            eye: w[0].into(),
-            dir: dir.into(),
-        });
-        t += step.length() / speed;
-    }
-    if let Some(last) = points.last() {
-        keyframes.push(Keyframe {
-            t,
-            eye: (*last).into(),
-            dir: dir.into(),
-        });
-    }
-    CameraPath {
-        kind: kind.into(),
-        keyframes,
-    }
 }
 
 /// One full turn on the spot.
@@ -525,18 +568,5 @@ mod tests {
             .validate()
             .is_err()
         );
-    }
-
-    #[test]
-    fn timed_paths_respect_speed_and_turn_rate() {
-        let pts = [
-            Vec3::ZERO,
-            Vec3::new(3.0, 0.0, 0.0),
-            Vec3::new(3.0, 0.0, 4.0),
-        ];
-        let p = timed("t", &pts, 1.0, std::f32::consts::FRAC_PI_2);
-        // 3 m + a 90° turn at 90°/s + 4 m, at 1 m/s.
-        assert!((p.duration() - 8.0).abs() < 1e-4, "{}", p.duration());
-        assert!(p.validate().is_ok());
     }
 }

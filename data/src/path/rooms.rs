@@ -4,6 +4,7 @@
 
 use crate::cells::CellGraph;
 use crate::geometry::Aabb;
+use glam::Vec3;
 
 /// Whether the cells have rooms to tour: two or more room-sized live cells joined through
 /// portals, or one closed room alone (a hall without openings), found by occluders (not a grid
@@ -64,4 +65,51 @@ pub fn walkable(graph: &CellGraph, portal: u32) -> bool {
     width >= DOOR_WIDTH
         && size.y >= DOOR_HEIGHT
         && p.rect.min[1] <= a.min[1].min(b.min[1]) + DOOR_SILL
+}
+
+/// Metres before and after a door at which the walk lines up with it (a door leaf is about
+/// this wide).
+pub(super) const DOOR_APPROACH_M: f32 = 1.0;
+
+/// A walk round a room: the corners of its floor inset by about a metre from its walls, at
+/// height `y`, starting with the far corner on the side of the corner nearest `entry` (where
+/// the room was entered) and ending at the other near corner (the nearest one lies behind the
+/// entry: the way out would step back). Every point is inside the room's
+/// (convex) cell. `None` when the room is too small to walk round (then the walk stands in its
+/// middle) or no entry is known.
+pub(super) fn room_loop(b: &Aabb, entry: Option<Vec3>, y: f32) -> Option<Vec<Vec3>> {
+    let entry = entry?;
+    let mut inset = [0.0f32; 3];
+    for k in [0, 2] {
+        let extent = b.max[k] - b.min[k];
+        inset[k] = (0.3 * extent).clamp(0.5, 1.0);
+        if extent - 2.0 * inset[k] < 0.8 {
+            return None;
+        }
+    }
+    let (x0, x1) = (b.min[0] + inset[0], b.max[0] - inset[0]);
+    let (z0, z1) = (b.min[2] + inset[2], b.max[2] - inset[2]);
+    // Corners in order round the room.
+    let corners = [
+        Vec3::new(x0, y, z0),
+        Vec3::new(x1, y, z0),
+        Vec3::new(x1, y, z1),
+        Vec3::new(x0, y, z1),
+    ];
+    let near = (0..4)
+        .min_by(|&i, &j| {
+            corners[i]
+                .distance(entry)
+                .total_cmp(&corners[j].distance(entry))
+        })
+        .unwrap_or(0);
+    // Of the near corner's two neighbours, the other near one is the closer to the entry: go
+    // round the other way, first along the side wall to the far corner.
+    let (left, right) = ((near + 3) % 4, (near + 1) % 4);
+    let step = if corners[left].distance(entry) < corners[right].distance(entry) {
+        1
+    } else {
+        3
+    };
+    Some((1..=4).map(|i| corners[(near + step * i) % 4]).collect())
 }
