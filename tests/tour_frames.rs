@@ -16,8 +16,8 @@ use portico_data::import::import_file;
 use portico_data::path::{CameraPath, PathKind, generate_around};
 use portico_render::{Draw, Renderer, sheet};
 
-/// The largest share of the image's pixels that are one colour (each channel to within 8 of
-/// 255: a flat-shaded wall, the sky).
+/// The largest share of the image's pixels that are one colour (each channel cut to 32 levels:
+/// a flat-shaded wall, the sky).
 fn one_colour_share(img: &RgbaImage) -> f64 {
     let mut bins = std::collections::HashMap::<[u8; 3], u32>::new();
     for p in img.pixels() {

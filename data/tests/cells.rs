@@ -448,6 +448,31 @@ proptest! {
     }
 }
 
+/// A visitor's tour (round rooms and furniture, looking ahead) stays in the live cells too, and
+/// its view direction is a unit vector all along.
+#[test]
+fn visitor_tours_stay_inside_live_cells() {
+    use portico_data::path::{PathKind, generate_around};
+    let (g, _, _, objects, _) = tiny();
+    for seed in 1..6 {
+        for kind in [PathKind::Tour, PathKind::Revisit] {
+            let path = generate_around(g, objects, kind, 4, seed, 1.5, 1.5).unwrap();
+            let end = path.duration();
+            let steps = (end / 0.02).ceil() as usize;
+            for i in 0..=steps {
+                let t = end * i as f32 / steps as f32;
+                let (eye, dir) = path.sample(t);
+                let cell = g.locate(eye);
+                assert!(
+                    cell.is_some_and(|c| g.cells[c as usize].live),
+                    "seed {seed}: at t = {t:.2} s the eye {eye} is in no live cell ({cell:?})"
+                );
+                assert!((dir.length() - 1.0).abs() < 1e-3, "{dir}");
+            }
+        }
+    }
+}
+
 #[test]
 fn standard_tours_stay_inside_live_cells() {
     use portico_data::path::{PathKind, generate};

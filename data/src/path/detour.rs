@@ -3,9 +3,11 @@
 //! desk, a door leaf open against a wall) is planned again on a grid over the cell's floor:
 //! A* (Hart, Nilsson & Raphael 1968) round the objects that reach between the knees and the
 //! top of the head, the walker's body radius about them, then pulled straight (each corner
-//! kept only where the straight line past it would hit an object). The cells are convex, so
-//! every detour stays in its cell. A step that cannot go round (a cell full of one object, as
-//! a stairwell's flight is) goes through the fewest objects it must.
+//! kept only where the straight line past it would hit an object). The cells are convex and
+//! every corner is kept inside its cell, so every detour stays in it. A step that cannot go
+//! round (a cell full of one object, as a stairwell's flight is) takes the way with the least
+//! length inside objects (walking through an object costs 50 times walking round it); a
+//! search too long for its cell leaves the step straight.
 //!
 //! All lengths in metres.
 
@@ -14,7 +16,7 @@ use crate::geometry::Aabb;
 use crate::person::EYE_HEIGHT;
 use glam::Vec3;
 use std::cmp::Reverse;
-use std::collections::BinaryHeap;
+use std::collections::{BinaryHeap, HashMap};
 
 /// Grid spacing over a cell's floor.
 pub const GRID_M: f32 = 0.2;
@@ -24,43 +26,56 @@ pub const BODY_RADIUS_M: f32 = 0.25;
 pub const STEP_OVER_M: f32 = 0.2;
 /// Cells with more grid nodes than this are not planned (their steps stay straight).
 const MAX_NODES: usize = 250_000;
+/// A search that has expanded this many nodes gives up (the step stays straight).
+const MAX_EXPANSIONS: usize = 50_000;
 
 /// `points` (consecutive ones sharing a cell of `graph`) with the steps that pass through
 /// `objects` replaced by ways round them. Points are kept; detours are inserted between them.
+/// Each cell's grid is made once, at each floor it is walked on.
 pub fn round_objects(graph: &CellGraph, objects: &[Aabb], points: &[Vec3]) -> Vec<Vec3> {
+    let mut grids: HashMap<(u32, i32), Option<Grid>> = HashMap::new();
     let mut out: Vec<Vec3> = points.first().copied().into_iter().collect();
     for w in points.windows(2) {
         let (a, b) = (w[0], w[1]);
-        if let Some(grid) = Grid::for_step(graph, objects, a, b)
-            && !grid.clear(a, b)
-        {
-            out.extend(grid.way(a, b));
+        if let Some(cell) = step_cell(graph, a, b) {
+            let floor = a.y.min(b.y) - EYE_HEIGHT;
+            let grid = grids
+                .entry((cell, (floor * 10.0).round() as i32))
+                .or_insert_with(|| Grid::new(&graph.cells[cell as usize].bounds, objects, floor));
+            if let Some(grid) = grid
+                && !grid.clear(a, b)
+            {
+                out.extend(grid.way(a, b));
+            }
         }
         out.push(b);
     }
     out
 }
 
-/// The free and blocked nodes of one cell's floor for a walker at one eye height.
+/// The cell holding the whole step from `a` to `b` on one floor, if there is one (a step
+/// through a portal or up a stair's hole has none: it is left straight).
+fn step_cell(graph: &CellGraph, a: Vec3, b: Vec3) -> Option<u32> {
+    let cell = graph.locate((a + b) * 0.5)?;
+    let c = &graph.cells[cell as usize].bounds;
+    let inside = |p: Vec3| (0..3).all(|k| p[k] >= c.min[k] - 1e-3 && p[k] <= c.max[k] + 1e-3);
+    (inside(a) && inside(b) && (a.y - b.y).abs() <= 0.5).then_some(cell)
+}
+
+/// The free and blocked nodes of one cell's floor for a walker standing on one floor.
 struct Grid {
-    min: Vec3,
+    /// The cell's box: nodes lie inside it.
+    cell: Aabb,
     nx: usize,
     nz: usize,
     blocked: Vec<bool>,
 }
 
 impl Grid {
-    /// The grid of the cell holding the step from `a` to `b` (both inside it), if any object
+    /// The grid of the cell `c` for a walker whose feet are at height `floor`, if any object
     /// reaches into the walker's body there.
-    fn for_step(graph: &CellGraph, objects: &[Aabb], a: Vec3, b: Vec3) -> Option<Grid> {
-        let cell = graph.locate((a + b) * 0.5)?;
-        let c = &graph.cells[cell as usize].bounds;
-        let inside = |p: Vec3| (0..3).all(|k| p[k] >= c.min[k] - 1e-3 && p[k] <= c.max[k] + 1e-3);
-        if !inside(a) || !inside(b) || (a.y - b.y).abs() > 0.5 {
-            return None;
-        }
-        let floor = a.y.min(b.y) - EYE_HEIGHT;
-        let (low, high) = (floor + STEP_OVER_M, a.y.max(b.y) + 0.2);
+    fn new(c: &Aabb, objects: &[Aabb], floor: f32) -> Option<Grid> {
+        let (low, high) = (floor + STEP_OVER_M, floor + EYE_HEIGHT + 0.2);
         let r = BODY_RADIUS_M;
         let solid: Vec<&Aabb> = objects
             .iter()
@@ -77,10 +92,9 @@ impl Grid {
         }
         let nx = ((c.max[0] - c.min[0]) / GRID_M).ceil().max(1.0) as usize;
         let nz = ((c.max[2] - c.min[2]) / GRID_M).ceil().max(1.0) as usize;
-        if nx * nz > MAX_NODES {
+        if nx.checked_mul(nz).is_none_or(|n| n > MAX_NODES) {
             return None;
         }
-        let min = Vec3::from(c.min);
         let mut blocked = vec![false; nx * nz];
         for o in solid {
             let span = |k: usize, n: usize| {
@@ -95,7 +109,7 @@ impl Grid {
             }
         }
         Some(Grid {
-            min,
+            cell: *c,
             nx,
             nz,
             blocked,
@@ -103,17 +117,25 @@ impl Grid {
     }
 
     fn node(&self, p: Vec3) -> usize {
-        let i = (((p.x - self.min.x) / GRID_M) as usize).min(self.nx - 1);
-        let j = (((p.z - self.min.z) / GRID_M) as usize).min(self.nz - 1);
+        let c = &self.cell;
+        let i = (((p.x - c.min[0]) / GRID_M).max(0.0) as usize).min(self.nx - 1);
+        let j = (((p.z - c.min[2]) / GRID_M).max(0.0) as usize).min(self.nz - 1);
         j * self.nx + i
     }
 
+    /// The middle of node `n` at height `y`, kept 5 cm inside the cell (the last row and
+    /// column of nodes may overhang it).
     fn centre(&self, n: usize, y: f32) -> Vec3 {
+        let c = &self.cell;
         let (i, j) = (n % self.nx, n / self.nx);
+        let inside = |k: usize, v: f32| {
+            let m = (0.25 * (c.max[k] - c.min[k])).min(0.05);
+            v.clamp(c.min[k] + m, c.max[k] - m)
+        };
         Vec3::new(
-            self.min.x + (i as f32 + 0.5) * GRID_M,
+            inside(0, c.min[0] + (i as f32 + 0.5) * GRID_M),
             y,
-            self.min.z + (j as f32 + 0.5) * GRID_M,
+            inside(2, c.min[2] + (j as f32 + 0.5) * GRID_M),
         )
     }
 
@@ -146,9 +168,14 @@ impl Grid {
         let key = |f: f32| Reverse((f * 1000.0) as u64);
         let mut open = BinaryHeap::from([(key(guess(start)), start)]);
         cost[start] = 0.0;
+        let mut expanded = 0;
         while let Some((_, cur)) = open.pop() {
             if cur == goal {
                 break;
+            }
+            expanded += 1;
+            if expanded > MAX_EXPANSIONS {
+                return Vec::new();
             }
             let (x, z) = (cur % self.nx, cur / self.nx);
             for (dx, dz) in [
@@ -192,10 +219,7 @@ impl Grid {
         nodes.reverse();
         // Pull the way straight: from each kept point, on to the furthest node in a clear
         // line from it.
-        let y = |n: usize| {
-            let s = nodes.iter().position(|&m| m == n).unwrap_or(0) as f32;
-            a.y + (b.y - a.y) * s / (nodes.len() - 1).max(1) as f32
-        };
+        let y = |i: usize| a.y + (b.y - a.y) * i as f32 / (nodes.len() - 1).max(1) as f32;
         let mut corners = Vec::new();
         let mut from = a;
         let mut i = 0;
@@ -205,7 +229,7 @@ impl Grid {
                 if j == nodes.len() - 1 {
                     b
                 } else {
-                    self.centre(nodes[j], y(nodes[j]))
+                    self.centre(nodes[j], y(j))
                 }
             };
             while j > i + 1 && !self.clear(from, target(j)) {

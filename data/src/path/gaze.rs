@@ -30,11 +30,24 @@ pub const MAX_PITCH_DEGREES: f32 = 25.0;
 pub fn walk(kind: &str, points: &[Vec3], speed: f32, turn: f32) -> CameraPath {
     let line = Polyline::new(points);
     let sharp = line.sharp_corners(SHARP_TURN_DEGREES.to_radians());
-    let mut samples: Vec<f32> = line.at.clone();
+    // Every corner, and a sample every STEP_M between them (not within a twentieth of a step
+    // of a corner, which is kept exactly).
+    let near_corner = |s: f32| {
+        let i = line.at.partition_point(|&c| c < s);
+        [i.checked_sub(1), Some(i)]
+            .into_iter()
+            .flatten()
+            .filter_map(|j| line.at.get(j))
+            .any(|&c| (c - s).abs() < 0.05 * STEP_M)
+    };
     let steps = (line.len() / STEP_M).floor() as usize;
-    samples.extend((1..=steps).map(|i| i as f32 * STEP_M));
+    let mut samples: Vec<f32> = line.at.clone();
+    samples.extend(
+        (1..=steps)
+            .map(|i| i as f32 * STEP_M)
+            .filter(|&s| !near_corner(s)),
+    );
     samples.sort_by(f32::total_cmp);
-    samples.dedup_by(|a, b| (*a - *b).abs() < 0.05 * STEP_M);
 
     let mut keyframes: Vec<Keyframe> = Vec::with_capacity(samples.len() + sharp.len());
     let mut t = 0.0f32;
@@ -299,6 +312,25 @@ mod tests {
                 .take_while(|k| k.t < at_end[0].t)
                 .all(|k| k.dir[0] > 0.99)
         );
+    }
+
+    #[test]
+    fn a_corner_just_past_a_step_is_kept_and_its_sharp_turn_made_standing() {
+        let pts = [
+            Vec3::ZERO,
+            Vec3::new(4.01, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, 0.1),
+        ];
+        let p = walk("t", &pts, 1.0, 1.0);
+        let at_end = p
+            .keyframes
+            .iter()
+            .filter(|k| Vec3::from(k.eye).distance(pts[1]) < 1e-4)
+            .count();
+        assert_eq!(at_end, 2, "{:#?}", p.keyframes);
+        // The last point too, 0.01 m past a step.
+        let last = p.keyframes.last().unwrap();
+        assert!(Vec3::from(last.eye).distance(pts[2]) < 1e-4);
     }
 
     #[test]

@@ -111,5 +111,5 @@ pub(super) fn room_loop(b: &Aabb, entry: Option<Vec3>, y: f32) -> Option<Vec<Vec
     } else {
         3
     };
-    Some((1..=4).map(|i| corners[(near + step * i) % 4]).collect())
+    Some((1..=3).map(|i| corners[(near + step * i) % 4]).collect())
 }
