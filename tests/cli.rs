@@ -36,6 +36,18 @@ fn generate_build_inspect_verify_cull() {
     let glb = generated(dir.path());
     let db = dir.path().join("tiny.portico");
     let _ = ok(&["build", s(&glb), "-o", s(&db)]);
+    // Geometry is compressed by default, and stored plain with --no-compress.
+    let compressed = |db: &std::path::Path| {
+        let db = portico_data::Database::open(db).unwrap();
+        db.segments()
+            .iter()
+            .filter(|e| portico_data::codec::is_compressed(&db.segment(e.id).unwrap()))
+            .count()
+    };
+    assert!(compressed(&db) > 0, "build compresses by default");
+    let plain = dir.path().join("plain.portico");
+    let _ = ok(&["build", s(&glb), "-o", s(&plain), "--no-compress"]);
+    assert_eq!(compressed(&plain), 0, "--no-compress stores geometry plain");
     let stats: serde_json::Value =
         serde_json::from_str(&ok(&["inspect", s(&db), "--json", "--verify"])).unwrap();
     for key in [
