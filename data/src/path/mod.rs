@@ -163,9 +163,9 @@ pub fn generate(
 
 /// [`generate`] as a visitor walks: looking ahead along the way ([`gaze`]), round each room
 /// visited, along its walls (not to its middle to turn there, facing the wall beside them),
-/// and round `objects` (world boxes; the
-/// model's instances) where they stand in the way ([`detour`]). The tour of `portico demo`,
-/// `portico path`, the server's `/v1/tour` and the browser.
+/// and round `objects` (world boxes; the model's instances) where they stand in the way
+/// ([`detour`]). The tour of `portico demo`, `portico path`, the server's `/v1/tour` and the
+/// browser.
 #[allow(clippy::too_many_arguments)]
 pub fn generate_around(
     graph: &CellGraph,
