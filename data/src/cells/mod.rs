@@ -17,6 +17,7 @@
 //! - [`verify`]: a ray-casting checker for false negatives and overestimation, against the
 //!   objects' real triangles ([`sight`]) or the occluder boxes.
 
+pub mod cone;
 pub mod cover;
 #[cfg(feature = "native")]
 pub mod guard;
@@ -25,6 +26,7 @@ pub mod paged;
 pub mod polytope;
 pub mod portals;
 pub mod realtime;
+pub mod region;
 #[cfg(feature = "native")]
 pub mod sight;
 pub mod sightline;

@@ -8,6 +8,7 @@
 //! - Frustum-to-cell / frustum-to-object: plain view-frustum culling, for comparison (the FTC
 //!   and FTO rows of Table 4.1).
 
+pub use super::cone::{Cone, cone_meets};
 use super::polytope::{Plane, clip_polygon};
 use super::{CellGraph, StabList, touches};
 use crate::geometry::Aabb;
@@ -52,9 +53,16 @@ impl Frustum {
         }
     }
 
-    /// Whether a box touches the frustum (conservative plane-by-plane test).
+    /// Whether a box touches the frustum (conservative plane-by-plane test: a large box beside
+    /// or behind the eye that meets each plane's inside but not the frustum passes).
     pub fn touches(&self, b: &Aabb) -> bool {
         self.planes.iter().all(|p| p.touches_box(b))
+    }
+
+    /// Whether a box meets the frustum, without [`Frustum::touches`]'s false positives
+    /// ([`cone_meets`]).
+    pub fn meets(&self, b: &Aabb) -> bool {
+        cone_meets(self.eye, &self.planes, b)
     }
 }
 
@@ -188,6 +196,35 @@ pub fn eye_to_object(reached: &[Reached], stab: &StabList, objects: &[Aabb]) -> 
             let b = &objects[o as usize];
             r.wedge.iter().all(|p| p.touches_box(b))
         }));
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+/// [`eye_to_object`] without the plane-by-plane test's false positives: each object's box must
+/// meet a wedge it is seen through ([`cone_meets`], the wedges' apex at `eye`). A subset of
+/// [`eye_to_object`] that keeps every object some sightline inside a wedge reaches; what a
+/// conservative test from a box of eyes keeps holds it ([`super::region`]).
+pub fn eye_to_object_exact(
+    reached: &[Reached],
+    stab: &StabList,
+    objects: &[Aabb],
+    eye: Vec3,
+) -> Vec<u32> {
+    let mut out = Vec::new();
+    for r in reached {
+        let Some(entry) = stab.entry(r.cell) else {
+            continue;
+        };
+        let cone = Cone::new(eye, &r.wedge);
+        out.extend(
+            entry
+                .objects
+                .iter()
+                .copied()
+                .filter(|&o| cone.meets(&objects[o as usize])),
+        );
     }
     out.sort_unstable();
     out.dedup();

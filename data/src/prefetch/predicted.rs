@@ -12,6 +12,11 @@
 //! where the walk would leave the live cells or pass from a cell to one that is not its
 //! neighbour through a portal: nobody walks through walls.
 //!
+//! Objects are tested against the wedges through portals and the view exactly
+//! ([`crate::cells::realtime::Cone::meets`]), not plane by plane: a big box beside the eye that
+//! meets each plane's inside but no sightline was listed, and the places of
+//! [`super::swept`], which must hold this answer, could not hold it.
+//!
 //! Each object is listed from the first point that sees it (its frames until visible), at the
 //! finest LOD the size threshold allows at its distance from the nearest point at or after that
 //! one. Looking all around from each point covers any turn; a change of course is seen by the
@@ -21,7 +26,7 @@ use super::lookahead::{max_lod, projected_pixels};
 use super::range::{self, ObserverRange, distance_to_box};
 use super::{Budget, Candidate, Prefetcher, need};
 use crate::cells::CellGraph;
-use crate::cells::realtime::{Frustum, eye_to_cell, eye_to_object};
+use crate::cells::realtime::{Cone, Frustum, eye_to_cell, eye_to_object_exact};
 use crate::error::Result;
 use glam::Vec3;
 use portico_protocol::{NeedItem, NeedKind, Observer, Policy};
@@ -166,12 +171,14 @@ impl Prefetcher {
                 let reached = eye_to_cell(graph, &Frustum::all_around(e.at));
                 cells.extend(reached.iter().map(|r| r.cell));
                 let stab = self.stab(e.cell)?;
-                around = Some((e.at, eye_to_object(&reached, &stab, &self.bounds)));
+                let seen = eye_to_object_exact(&reached, &stab, &self.bounds, e.at);
+                around = Some((e.at, seen));
             }
             let view = view_at(obs, policy, e);
+            let view = Cone::new(view.eye, &view.planes);
             let seen = around.as_ref().map_or(&[][..], |a| &a.1[..]);
             for &o in seen {
-                if view.touches(&self.bounds[o as usize])
+                if view.meets(&self.bounds[o as usize])
                     && let std::collections::hash_map::Entry::Vacant(v) = first.entry(o)
                 {
                     v.insert(k);

@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 use portico_data::build::BuildOptions;
-use portico_data::cells::realtime::{Frustum, eye_to_cell, eye_to_object};
+use portico_data::cells::realtime::{Frustum, eye_to_cell, eye_to_object, eye_to_object_exact};
 use portico_data::prefetch::Prefetcher;
 use portico_protocol::{Granularity, LookaheadCull, NeedKind, Observer, Policy, RangeCull};
 use std::collections::HashSet;
@@ -60,7 +60,9 @@ fn observers(p: &Prefetcher) -> Vec<Observer> {
 }
 
 /// The coarsest-LOD segment of every object the observer sees now (eye-to-object visibility,
-/// Funkhouser §4.2), with the object's id; the prefetcher must have cells.
+/// Funkhouser §4.2, each box tested against its wedge exactly: a big box beside the eye that
+/// only the plane-by-plane test passes no sightline reaches, and the predicted lookahead leaves
+/// it out), with the object's id; the prefetcher must have cells.
 fn coarsest_visible_now(p: &Prefetcher, obs: &Observer) -> Vec<(u32, u32)> {
     let header = p.database().header();
     let objects: Vec<_> = header.instances.iter().map(|i| i.bounds).collect();
@@ -73,7 +75,7 @@ fn coarsest_visible_now(p: &Prefetcher, obs: &Observer) -> Vec<(u32, u32)> {
         obs.half_fov_y,
     );
     let stab = p.stab(g.locate(obs.eye.into()).unwrap()).unwrap();
-    eye_to_object(&eye_to_cell(g, &view), &stab, &objects)
+    eye_to_object_exact(&eye_to_cell(g, &view), &stab, &objects, obs.eye.into())
         .into_iter()
         .map(|o| {
             let lods = header.lods_of(&header.instances[o as usize]);
