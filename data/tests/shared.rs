@@ -185,7 +185,7 @@ fn an_eye_outside_every_live_cell_is_not_shared() {
         eye: far.into(),
         ..observers(p)[0]
     };
-    assert!(p.share_place(&obs).is_none());
+    assert!(p.share_place(&obs, &Policy::default()).is_none());
     assert!(p.share_key(&obs, &Policy::default()).is_none());
     // It is still answered, from the nearest cell, one observer at a time.
     assert!(
@@ -199,7 +199,12 @@ fn an_eye_outside_every_live_cell_is_not_shared() {
 #[test]
 fn one_computation_serves_everyone_in_the_cell_and_bucket() {
     let p = prefetcher();
-    let policy = Policy::default();
+    // The range lookahead: its places are whole cells (the predicted one's are finer:
+    // `shared_predicted.rs`).
+    let policy = Policy {
+        lookahead_cull: LookaheadCull::Frustum,
+        ..Policy::default()
+    };
     let g = p.graph().unwrap();
     let (i, c) = g
         .cells

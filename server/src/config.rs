@@ -33,10 +33,17 @@ pub struct Config {
     /// Time a client has to send a request's headers (and an idle keep-alive connection to
     /// start its next request) before the connection is closed.
     pub header_timeout: Duration,
-    /// Stream sessions share one need list per eye cell and direction bucket and recompute only
-    /// when the observer leaves them (`portico_data::prefetch::shared`); off, every observer
-    /// gets its own list, computed for it (exact; the baseline of the stress figures).
+    /// Stream sessions and `/v1/prefetch` share one need list per place (eye cell and
+    /// direction bucket; under the predicted lookahead also the eye's metre and the velocity's
+    /// and turn's buckets) and a session recomputes only when its observer leaves its place
+    /// (`portico_data::prefetch::shared`); off, every observer gets its own list, computed for
+    /// it (exact; the baseline of the stress figures).
     pub shared_answers: bool,
+    /// With `shared_answers`, the share of the compute slots observers' own answers may take:
+    /// while answering every observer with its own would fit, each gets its own; past it,
+    /// answers are shared (`crate::answers`): a few clients get their own, a crowd shares.
+    /// 0: always shared.
+    pub exact_share: f64,
     /// Memory for the shared need lists (bytes; least recently used dropped first).
     pub shared_cache_bytes: usize,
     /// How long requests in flight may finish after a stop or reload before their connections
@@ -64,6 +71,7 @@ impl Default for Config {
             header_timeout: Duration::from_secs(10),
             drain: Duration::from_secs(10),
             shared_answers: true,
+            exact_share: 0.1,
             shared_cache_bytes: portico_data::prefetch::shared::DEFAULT_CACHE_BYTES,
             viewer: None,
         }

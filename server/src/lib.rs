@@ -16,6 +16,7 @@
 // C decoders and libc calls).
 #![deny(unsafe_code)]
 
+mod answers;
 mod compute;
 mod conditional;
 mod config;

@@ -44,8 +44,8 @@ pub struct Metrics {
     /// Observers received on stream sessions.
     pub stream_updates: AtomicU64,
     /// Need lists stream sessions started computing for their own observer, shared with
-    /// nobody: the predicted lookahead depends on the observer's motion; an eye outside the
-    /// live cells, a model without cells or `--exact-answers` has no shared place.
+    /// nobody: an eye outside the live cells, a model without cells or `--exact-answers` has
+    /// no shared place.
     pub stream_own_lists: AtomicU64,
     /// Stream updates by seconds from arrival to the need list in place (0 when the observer
     /// stayed in its place), bucketed by [`BUCKETS`].

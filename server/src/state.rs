@@ -20,6 +20,8 @@ pub struct AppState {
     pub config: Config,
     /// Where prefetch answers are computed (off the async workers, within a deadline).
     pub compute: Compute,
+    /// The CPU observers' own answers may take before answers are shared.
+    pub exact: crate::answers::ExactBudget,
     /// Counters and histograms (kept across reloads: [`AppState::open_after`]).
     pub metrics: Arc<Metrics>,
     /// Strong identifier of the file's contents (the manifest's ETag).
@@ -58,6 +60,13 @@ impl std::fmt::Debug for AppState {
 }
 
 impl AppState {
+    /// Whether an observer asking for an answer now gets the shared list of its place rather
+    /// than its own (sharing on, and own answers for everyone would take more than their
+    /// share of the compute slots: `crate::answers`). Counts the ask.
+    pub fn sharing_now(&self) -> bool {
+        self.config.shared_answers && !self.exact.own_answer(std::time::Instant::now())
+    }
+
     /// Opens the file read-only (memory-mapped), validates it, and prepares the manifest.
     pub fn open(path: &std::path::Path, config: Config) -> Result<Arc<AppState>, DataError> {
         let db = Arc::new(Database::open(path)?);
@@ -122,6 +131,11 @@ impl AppState {
             etags,
             prefetcher,
             compute: Compute::new(config.compute_slots, config.compute_deadline),
+            exact: crate::answers::ExactBudget::new(
+                config.exact_share,
+                config_slots,
+                std::time::Instant::now(),
+            ),
             config,
             metrics,
             database_id,

@@ -44,14 +44,18 @@ pub struct Args {
     /// Deadline of one prefetch answer, milliseconds (past it the request gets a 503).
     #[arg(long, default_value_t = 250)]
     prefetch_deadline_ms: u64,
-    /// Compute each stream observer's own need list instead of sharing one per cell and
-    /// direction bucket (the baseline the shared answers are measured against; exact, costly).
+    /// Compute each observer's own need list (stream and `/v1/prefetch`) instead of sharing
+    /// one per place (the baseline the shared answers are measured against; exact, costly).
     #[arg(long)]
     exact_answers: bool,
     /// The built browser viewer to serve at `/` (default: `target/viewer` under the current
     /// folder, where `web/build.sh` puts it, else beside the binary's folder).
     #[arg(long, value_name = "DIR")]
     viewer: Option<PathBuf>,
+    /// The share of the compute slots observers' own answers may take before answers are
+    /// shared by place (a few clients get their own, a crowd shares; 0: always shared).
+    #[arg(long, default_value_t = 0.1, value_name = "FRACTION")]
+    exact_share: f64,
     /// Memory for the stream sessions' shared need lists, MB.
     #[arg(long, default_value_t = 256)]
     shared_cache_mb: usize,
@@ -110,6 +114,7 @@ pub fn run(mut a: Args) -> Result<()> {
         compute_deadline: Duration::from_millis(a.prefetch_deadline_ms.max(1)),
         drain: Duration::from_secs(a.drain_secs),
         shared_answers: !a.exact_answers,
+        exact_share: a.exact_share,
         shared_cache_bytes: a.shared_cache_mb << 20,
         viewer: viewer_dir(a.viewer)?,
         ..Config::default()

@@ -5,6 +5,7 @@
 //! - [`lookahead`]: the lookahead objects and each one's maximum LOD (§5.2.2).
 //! - [`predicted`]: the lookahead as what is seen from the eye's predicted positions.
 //! - [`shared`]: one need list for every observer in a cell looking the same way, cached.
+//! - [`swept`]: the predicted lookahead of every observer in the same place, for [`shared`].
 //! - this module: the read set — stab lists of the range cells first, then the geometry of what
 //!   the observer sees right now, then the rest, each ordered by LOD (coarsest first) and by
 //!   when it can become visible, cut at the read budget but never before the coarsest LOD of
@@ -17,6 +18,7 @@ pub mod lookahead;
 pub mod predicted;
 pub mod range;
 pub mod shared;
+pub mod swept;
 
 use crate::Database;
 use crate::cells::{CellGraph, StabList};

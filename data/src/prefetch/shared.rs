@@ -9,16 +9,21 @@
 //! lookahead stops). What differs per client is only what it already holds:
 //! [`super::NeedList::cut`] takes that difference in one pass over the list.
 //!
+//! The predicted lookahead depends on more (the observer's velocity and turn), and on where in
+//! the cell the eye is: its places are finer ([`super::swept`]), and their lists are made from
+//! the regions every observer of the place may be in, so the same holds.
+//!
 //! So a server answers a crowd on one tour with a handful of computations, and a stream
 //! session computes nothing while its observer stays in its cell and bucket.
 
 use super::range::ObserverRange;
+use super::swept::{Motion, VIEW_AZIMUTH, VIEW_ELEVATION};
 use super::{Budget, NeedList, Prefetcher};
 use crate::cells::CellGraph;
 use crate::cells::realtime::Frustum;
 use crate::error::Result;
 use glam::Vec3;
-use portico_protocol::{Observer, Policy};
+use portico_protocol::{LookaheadCull, Observer, Policy};
 use std::collections::{HashMap, HashSet};
 use std::f32::consts::PI;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
@@ -37,29 +42,40 @@ pub const DEFAULT_CACHE_BYTES: usize = 256 << 20;
 
 /// The bucket of a view direction (y up) and the bucket's centre direction (unit).
 pub fn direction_bucket(dir: Vec3) -> (u16, Vec3) {
+    direction_bucket_in(dir, AZIMUTH_BUCKETS, ELEVATION_BUCKETS)
+}
+
+/// The bucket of a direction (y up) among `azimuth` sectors by `elevation` bands, and the
+/// bucket's centre direction (unit). Every direction is within half a sector plus half a band
+/// of its centre (`PI / azimuth + PI / (2 * elevation)` radians).
+pub fn direction_bucket_in(dir: Vec3, azimuth: u32, elevation: u32) -> (u16, Vec3) {
     let d = dir.try_normalize().unwrap_or(Vec3::NEG_Z);
     let az = d.z.atan2(d.x).rem_euclid(2.0 * PI);
     let el = d.y.clamp(-1.0, 1.0).asin() + PI / 2.0; // 0..π
-    let a = ((az / (2.0 * PI) * AZIMUTH_BUCKETS as f32) as u32).min(AZIMUTH_BUCKETS - 1);
-    let e = ((el / PI * ELEVATION_BUCKETS as f32) as u32).min(ELEVATION_BUCKETS - 1);
+    let a = ((az / (2.0 * PI) * azimuth as f32) as u32).min(azimuth - 1);
+    let e = ((el / PI * elevation as f32) as u32).min(elevation - 1);
     let (ca, ce) = (
-        (a as f32 + 0.5) * 2.0 * PI / AZIMUTH_BUCKETS as f32,
-        (e as f32 + 0.5) * PI / ELEVATION_BUCKETS as f32 - PI / 2.0,
+        (a as f32 + 0.5) * 2.0 * PI / azimuth as f32,
+        (e as f32 + 0.5) * PI / elevation as f32 - PI / 2.0,
     );
     let centre = Vec3::new(ce.cos() * ca.cos(), ce.sin(), ce.cos() * ca.sin());
-    ((e * AZIMUTH_BUCKETS + a) as u16, centre)
+    ((e * azimuth + a) as u16, centre)
 }
 
 /// Where an observer stands for sharing: the eye cell, the direction bucket, and its speed,
-/// turn rate and field of view (exact bits: one client sends the same ones every frame). A
-/// stream session recomputes only when this changes.
+/// turn rate and field of view (exact bits: one client sends the same ones every frame); under
+/// the predicted lookahead also the eye's cube, its velocity's and turn's buckets
+/// ([`super::swept::Motion`]) and a fine direction bucket. A stream session recomputes only
+/// when this changes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub struct SharePlace {
-    /// The live cell the eye is in (or the nearest live one).
+    /// The live cell the eye is in.
     pub cell: u32,
-    /// [`direction_bucket`].
+    /// [`direction_bucket`] (under the predicted lookahead: [`direction_bucket_in`] with
+    /// [`super::swept::VIEW_AZIMUTH`] × [`super::swept::VIEW_ELEVATION`]).
     pub bucket: u16,
     motion: [u32; 4],
+    predicted: Option<Motion>,
 }
 
 /// What a shared need list depends on: the [`SharePlace`] and the policy (its bincode bytes).
@@ -147,18 +163,31 @@ fn entry_bytes(key: &ShareKey, list: &NeedList) -> usize {
 }
 
 impl Prefetcher {
-    /// Where `obs` stands for sharing; `None` without cells or with the eye outside every live
-    /// cell, where answers are computed per observer. Cheap: a k-D descent and an `atan2`.
-    pub fn share_place(&self, obs: &Observer) -> Option<SharePlace> {
+    /// Where `obs` stands for sharing under `policy`; `None` without cells or with the eye
+    /// outside every live cell (and, under the predicted lookahead, for a view, velocity or
+    /// turn that is not a finite number or too large to bucket), where answers are computed
+    /// per observer. Cheap: a k-D descent and a few `atan2`.
+    pub fn share_place(&self, obs: &Observer, policy: &Policy) -> Option<SharePlace> {
         let graph = self.graph.as_ref()?;
         // Only an eye inside its cell: the widened range holds the observers in the cell, not
         // one in a wall or outside the model (that one gets its own answer).
         let cell = graph
             .locate(Vec3::from(obs.eye))
             .filter(|&c| graph.cells[c as usize].live)?;
+        let dir = Vec3::from(obs.dir);
+        let (bucket, predicted) = if policy.lookahead_cull == LookaheadCull::Predicted {
+            if !dir.is_finite() {
+                return None;
+            }
+            let fine = direction_bucket_in(dir, VIEW_AZIMUTH, VIEW_ELEVATION).0;
+            (fine, Some(Motion::of(obs)?))
+        } else {
+            (direction_bucket(dir).0, None)
+        };
         Some(SharePlace {
             cell,
-            bucket: direction_bucket(Vec3::from(obs.dir)).0,
+            bucket,
+            predicted,
             motion: [
                 obs.max_speed.to_bits(),
                 obs.max_turn.to_bits(),
@@ -171,7 +200,10 @@ impl Prefetcher {
     /// The key of the shared need list serving `obs` under `policy` (see
     /// [`Prefetcher::share_place`]).
     pub fn share_key(&self, obs: &Observer, policy: &Policy) -> Option<ShareKey> {
-        Some(ShareKey::new(self.share_place(obs)?, encode_policy(policy)))
+        Some(ShareKey::new(
+            self.share_place(obs, policy)?,
+            encode_policy(policy),
+        ))
     }
 
     /// The cached need list for `key`, if any (cheap: one lock and a hash lookup).
@@ -257,12 +289,16 @@ impl Prefetcher {
         };
         self.shared.misses.fetch_add(1, Relaxed);
         let cell = key.place.cell;
-        let bounds = graph.cells[cell as usize].bounds;
-        let (_, dir) = direction_bucket(Vec3::from(obs.dir));
-        let range = ObserverRange::for_cell(cell, &bounds, dir, BUCKET_SPREAD, obs, policy);
-        let now = self.visible_from_cell(graph, cell, &range, obs)?;
-        let (ranged, stabs, cands, cells) =
-            self.lookahead_with_cells(graph, &range, &now, obs.half_fov_y, policy, budget)?;
+        let (ranged, stabs, cands, cells) = match &key.place.predicted {
+            Some(motion) => self.lookahead_swept(graph, cell, motion, obs, policy, budget)?,
+            None => {
+                let bounds = graph.cells[cell as usize].bounds;
+                let (_, dir) = direction_bucket(Vec3::from(obs.dir));
+                let range = ObserverRange::for_cell(cell, &bounds, dir, BUCKET_SPREAD, obs, policy);
+                let now = self.visible_from_cell(graph, cell, &range, obs)?;
+                self.lookahead_with_cells(graph, &range, &now, obs.half_fov_y, policy, budget)?
+            }
+        };
         budget.check()?;
         let mut list = NeedList::ordered(stabs, cands);
         list.range_cells = ranged;

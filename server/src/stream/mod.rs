@@ -5,17 +5,20 @@
 //! which queued items it dropped because their need vanished; and forgets segments the client
 //! reports evicted. No round trip per frame is needed.
 //!
-//! Under the predicted lookahead (the default policy) every observer gets its own need list,
-//! since what it will see depends on its velocity and turn, and the session pushes an item
+//! Under the predicted lookahead (the default policy) what an observer will see depends on its
+//! velocity and turn as well as its cell and view, so its places are finer (the metre of the
+//! cell it is in, and buckets of its view, velocity and turn: `portico_data::prefetch::swept`),
+//! and the session pushes an item
 //! only when leaving it to the next observer's list would make it late
 //! ([`portico_data::deadline`]): the lead is the list's age (counted from when the client sent
 //! the observer, half its round trip before it arrived), a frame until the next observer, the
 //! round trip and the margin, and what is queued is the push clock's backlog at the session's
 //! rate. What is not due yet stays in the list for the next push, or for the next list.
 //!
-//! Under Funkhouser's range lookahead answers are shared and incremental: the need list depends
-//! only on the eye cell and a direction bucket (`portico_data::prefetch::shared`), so an observer that stays in its cell
-//! and bucket costs a k-D descent and nothing else, a new place whose list some session already
+//! Answers are shared and incremental: under Funkhouser's range lookahead the need list
+//! depends only on the eye cell and a direction bucket (`portico_data::prefetch::shared`), and
+//! under the predicted one on the finer place above, so an observer that stays in its place
+//! costs a k-D descent and nothing else, a new place whose list some session already
 //! computed costs a cache lookup, and only a new place nobody has asked for is computed. What
 //! is left to push is the list past a cursor, minus the mirror: no per-session copy of it.
 //! A database without cells falls back to one computation per observer.

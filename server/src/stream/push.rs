@@ -1,5 +1,5 @@
-//! Need lists and pushes of a stream session: an observer's need list (shared by place under
-//! the range lookahead, its own under the predicted one) computed on a compute slot with the
+//! Need lists and pushes of a stream session: an observer's need list (shared by place)
+//! computed on a compute slot with the
 //! stab lists' pages a paged client needs, and the pushes in need order, each when it cannot
 //! wait for the next list (Funkhouser §5.2.3 with deadlines), paced to the session's rate.
 
@@ -38,7 +38,10 @@ impl Session {
                         Some(k) => p.shared_list(k, &obs, &policy, &budget),
                         None => {
                             s.metrics.stream_own_lists.fetch_add(1, Relaxed);
-                            p.need_list_within(&obs, &policy, &budget).map(Arc::new)
+                            let t0 = std::time::Instant::now();
+                            let own = p.need_list_within(&obs, &policy, &budget).map(Arc::new);
+                            s.exact.charge(t0.elapsed().as_secs_f64());
+                            own
                         }
                     }
                     .map_err(Error::from)?;
@@ -75,10 +78,9 @@ impl Session {
     /// another session computed; otherwise a computation (only the latest observer waits).
     /// The shared place of `obs` under the session's policy (`None`: its list is its own).
     pub(super) fn place_of(&self, obs: &Observer) -> Option<SharePlace> {
-        // A predicted lookahead depends on the observer's motion: no two observers share it.
-        let shared = self.state.config.shared_answers && !self.deadlines();
-        shared
-            .then(|| self.state.prefetcher.share_place(obs))
+        self.state
+            .sharing_now()
+            .then(|| self.state.prefetcher.share_place(obs, &self.policy))
             .flatten()
     }
 
@@ -95,6 +97,8 @@ impl Session {
         };
         if place.is_some() && place == self.place {
             m.update(arrived.elapsed().as_secs_f64(), updates);
+            // The list holds every observer of the place: its deadlines count from this one.
+            self.observed = Instant::now();
             return None;
         }
         if let Some(p) = place {
@@ -148,7 +152,12 @@ impl Session {
         if took * 2 >= self.state.config.compute_deadline {
             self.compute_after = Instant::now() + took;
         }
-        let stale = p.generation != self.generation || (p.place.is_some() && p.place != self.want);
+        // A list for a place the observer has left is stale under the range lookahead (the
+        // next one is a cache lookup away); with deadlines it is the freshest there is, and
+        // is taken while the next place's list is computed (a turning observer changes place
+        // faster than lists come).
+        let moved = p.place.is_some() && p.place != self.want && !self.deadlines();
+        let stale = p.generation != self.generation || moved;
         match list {
             Ok(_) if stale => None,
             Ok(l) => self.take_list(l, p.place, p.at),

@@ -102,6 +102,8 @@ fn binary(msg: &StreamClient) -> Message {
 async fn the_stream_pushes_needed_segments_and_survives_vanishing_clients() {
     let s = start(Config {
         max_sessions: 1,
+        // Shared answers whatever the load (a few clients get their own by default).
+        exact_share: 0.0,
         ..Config::default()
     })
     .await;
@@ -117,9 +119,8 @@ async fn the_stream_pushes_needed_segments_and_survives_vanishing_clients() {
     }
     let db = s.state.db();
     let mut req = request(db);
-    // Under the range lookahead (the predicted one is each observer's own, pushed by deadline:
-    // tests/stream.rs) the session pushes its place's shared need list (the eye cell and
-    // direction bucket's).
+    // Under the range lookahead (the predicted one pushes by deadline: tests/stream/) the
+    // session pushes its place's shared need list (the eye cell and direction bucket's).
     req.policy.lookahead_cull = portico_protocol::LookaheadCull::Any;
     let p = &s.state.prefetcher;
     let key = p.share_key(&req.observer, &req.policy).expect("cells");

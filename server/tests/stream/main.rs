@@ -2,9 +2,10 @@
 //! rate, nothing the client holds is sent again (and an `Evicted` segment is), queued segments a
 //! new observer no longer needs are reported `Dropped` and never sent, an observer that stays in
 //! its cell and direction bucket costs no computation, and a silent client is closed after the
-//! idle timeout with a Close frame. Those use Funkhouser's range lookahead, whose lists sessions
-//! share; under the predicted lookahead (the default) a session pushes an item only once a
-//! later list could not bring it in time.
+//! idle timeout with a Close frame. Those use Funkhouser's range lookahead on a server that
+//! shares lists by place whatever its load; under the predicted lookahead (the default) a
+//! session pushes an item only once a later list could not bring it in time, and a walker
+//! looks a list up only when it changes place (`predicted.rs`).
 
 use futures_util::{SinkExt, StreamExt};
 use portico_data::prefetch::{Budget, NeedList};
@@ -19,7 +20,10 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio_tungstenite::tungstenite::Message;
 
+#[path = "../common/mod.rs"]
 mod common;
+mod paged;
+mod predicted;
 use common::start;
 
 /// A request under Funkhouser's range lookahead (every visible cell), whose need lists the
@@ -50,6 +54,23 @@ async fn hello(ws: &mut Ws, policy: Policy, rate: u64) {
         rtt_ms: 0,
     };
     ws.send(binary(&msg)).await.unwrap();
+}
+
+/// A server that shares answers by place whatever its load (by default a few clients get their
+/// own answers: `Config::exact_share`).
+fn shared() -> Config {
+    Config {
+        exact_share: 0.0,
+        ..Config::default()
+    }
+}
+
+/// A server that answers every observer with its own list.
+fn own() -> Config {
+    Config {
+        shared_answers: false,
+        ..Config::default()
+    }
 }
 
 /// The need list a session pushes for `obs`: the shared list of its cell and direction bucket.
@@ -111,7 +132,7 @@ async fn segments(ws: &mut Ws, want: usize) -> Vec<(u32, usize)> {
 
 #[tokio::test]
 async fn pushes_are_paced_to_the_sessions_byte_rate() {
-    let s = start(Config::default()).await;
+    let s = start(shared()).await;
     let req = request(s.state.db());
     let answer = need_list(&s.state, &req.observer, &req.policy);
     let total: u64 = answer.items.iter().map(|i| i.bytes).sum();
@@ -150,7 +171,7 @@ async fn pushes_are_paced_to_the_sessions_byte_rate() {
 
 #[tokio::test]
 async fn nothing_held_is_sent_again_and_an_evicted_segment_is() {
-    let s = start(Config::default()).await;
+    let s = start(shared()).await;
     let req = request(s.state.db());
     let n = need_list(&s.state, &req.observer, &req.policy).items.len();
     let mut ws = connect(&s.base).await;
@@ -179,7 +200,7 @@ async fn nothing_held_is_sent_again_and_an_evicted_segment_is() {
 
 #[tokio::test]
 async fn queued_segments_no_longer_needed_are_dropped_and_never_sent() {
-    let s = start(Config::default()).await;
+    let s = start(shared()).await;
     let db = s.state.db();
     let req = request(db);
     let g = db.cell_graph().unwrap().unwrap();
@@ -279,10 +300,10 @@ async fn a_silent_client_is_closed_after_the_idle_timeout() {
 #[tokio::test]
 async fn an_observer_that_stays_in_its_cell_and_bucket_costs_no_computation() {
     use std::sync::atomic::Ordering::Relaxed;
-    let s = start(Config::default()).await;
+    let s = start(shared()).await;
     let req = request(s.state.db());
     let p = &s.state.prefetcher;
-    let place = p.share_place(&req.observer).unwrap();
+    let place = p.share_place(&req.observer, &req.policy).unwrap();
     // Twenty observers a few centimetres apart, turning a little: one place.
     let walk: Vec<Observer> = (0..20)
         .map(|i| {
@@ -291,7 +312,7 @@ async fn an_observer_that_stays_in_its_cell_and_bucket_costs_no_computation() {
             o.dir[1] += 0.001 * i as f32;
             o
         })
-        .filter(|o| p.share_place(o) == Some(place))
+        .filter(|o| p.share_place(o, &req.policy) == Some(place))
         .collect();
     assert!(walk.len() >= 10, "the walk left its place at once");
     let n = need_list(&s.state, &req.observer, &req.policy).items.len();
@@ -331,7 +352,7 @@ async fn an_observer_that_stays_in_its_cell_and_bucket_costs_no_computation() {
 
 #[tokio::test]
 async fn a_session_pushes_no_more_than_the_clients_cache_holds_but_all_it_must() {
-    let s = start(Config::default()).await;
+    let s = start(shared()).await;
     let req = request(s.state.db());
     let full = need_list(&s.state, &req.observer, &req.policy);
     // A cache that holds a third of the list.
@@ -368,7 +389,7 @@ async fn a_session_pushes_no_more_than_the_clients_cache_holds_but_all_it_must()
 /// list has aged enough that the next one could not bring it in time; in the end, all of it.
 #[tokio::test]
 async fn a_predicted_session_pushes_each_item_when_it_cannot_wait_for_the_next_list() {
-    let s = start(Config::default()).await;
+    let s = start(own()).await;
     let mut req = common::request(s.state.db());
     assert_eq!(req.policy.lookahead_cull, LookaheadCull::Predicted);
     req.observer.velocity = [1.5, 0.0, 0.0];
@@ -426,7 +447,7 @@ async fn a_predicted_session_pushes_each_item_when_it_cannot_wait_for_the_next_l
 /// on.
 #[tokio::test]
 async fn what_the_frame_lacked_is_pushed_first_and_a_bad_id_is_refused() {
-    let s = start(Config::default()).await;
+    let s = start(own()).await;
     let req = common::request(s.state.db());
     let list = s
         .state
@@ -460,137 +481,4 @@ async fn what_the_frame_lacked_is_pushed_first_and_a_bad_id_is_refused() {
     let first: Vec<u32> = got.iter().take(2).map(|&(id, _)| id).collect();
     assert_eq!(first, extra, "what the frame lacked comes first");
     assert!(list.segments.contains(&got[2].0), "then the list: {got:?}");
-}
-
-/// A session that started from the core manifest gets each stab list's page right before the
-/// list, once: the page names the list's segment, and every segment pushed after it has its
-/// row in a page that came before it (so the client can check it).
-#[tokio::test]
-async fn a_paged_session_gets_each_page_before_its_stab_list_once() {
-    let s = start(Config::default()).await;
-    let db = s.state.db();
-    let req = request(db);
-    let list = need_list(&s.state, &req.observer, &req.policy);
-    let stabs: HashSet<u32> = db
-        .header()
-        .cells
-        .as_ref()
-        .unwrap()
-        .stab_segments
-        .iter()
-        .copied()
-        .collect();
-    let listed_stabs = list
-        .items
-        .iter()
-        .filter(|i| stabs.contains(&i.segment))
-        .count();
-    assert!(listed_stabs >= 2, "the list has {listed_stabs} stab lists");
-    let mut ws = connect(&s.base).await;
-    hello(&mut ws, req.policy, 1 << 30).await;
-    ws.send(binary(&StreamClient::Pages)).await.unwrap();
-    let observe = binary(&StreamClient::Observer(req.observer));
-    ws.send(observe.clone()).await.unwrap();
-    let (segments_got, pages) = paged_frames(&mut ws, db, &stabs, list.items.len()).await;
-    assert_eq!(segments_got, list.items.len());
-    assert_eq!(pages, listed_stabs, "one page per stab list pushed");
-    // Evicted and pushed again, a stab list comes without its page: the client has it.
-    let stab = list
-        .items
-        .iter()
-        .find(|i| stabs.contains(&i.segment))
-        .unwrap()
-        .segment;
-    ws.send(binary(&StreamClient::Evicted(vec![stab])))
-        .await
-        .unwrap();
-    ws.send(observe).await.unwrap();
-    match next(&mut ws, Duration::from_secs(10)).await {
-        Some(Got::Segment(id, _)) => assert_eq!(id, stab),
-        other => panic!("{other:?} instead of stab list {stab} alone"),
-    }
-}
-
-/// Reads a paged session's frames until `want` segments came (or 3 s of silence), checking that
-/// each stab list comes right after its page and every segment after a page with its row;
-/// returns the segments and the pages that came.
-async fn paged_frames(
-    ws: &mut Ws,
-    db: &portico_data::Database,
-    stabs: &HashSet<u32>,
-    want: usize,
-) -> (usize, usize) {
-    use portico_data::format::CellPage;
-    let mut rows = std::collections::HashMap::new();
-    let mut page_for: Option<u32> = None;
-    let (mut segments_got, mut pages) = (0, 0);
-    while segments_got < want {
-        match next(ws, Duration::from_secs(3)).await {
-            Some(Got::Page(deflated)) => {
-                assert!(page_for.is_none(), "two pages in a row");
-                let page: CellPage = portico_protocol::inflate_page(&deflated).unwrap();
-                rows.extend(page.segments.iter().copied());
-                rows.insert(page.stab.0, page.stab.1);
-                page_for = Some(page.stab.0);
-                pages += 1;
-            }
-            Some(Got::Segment(id, n)) => {
-                segments_got += 1;
-                if stabs.contains(&id) {
-                    assert_eq!(
-                        page_for.take(),
-                        Some(id),
-                        "stab list {id} without its page first"
-                    );
-                } else {
-                    assert!(
-                        page_for.is_none(),
-                        "a page, then segment {id}, no stab list"
-                    );
-                }
-                let row = rows
-                    .get(&id)
-                    .unwrap_or_else(|| panic!("segment {id} came before any page with its row"));
-                let e = db.segments()[id as usize];
-                assert_eq!(
-                    (row.bytes, row.checksum, n as u64),
-                    (e.length, e.checksum, e.length)
-                );
-            }
-            None => break,
-            other => panic!("{other:?} after {segments_got} segments"),
-        }
-    }
-    (segments_got, pages)
-}
-
-/// Under the default policy at a real link's rate, where deadlines would push a large LOD
-/// before the small stab list that names it, a paged session still sends every stab list (with
-/// its page) first: no segment reaches the client before a row it can be checked against.
-#[tokio::test]
-async fn a_paged_session_at_a_slow_rate_sends_no_segment_before_its_row() {
-    let s = start(Config::default()).await;
-    let db = s.state.db();
-    let req = common::request(db); // the default policy: the predicted lookahead
-    assert_eq!(req.policy.lookahead_cull, LookaheadCull::Predicted);
-    let stabs: HashSet<u32> = db
-        .header()
-        .cells
-        .as_ref()
-        .unwrap()
-        .stab_segments
-        .iter()
-        .copied()
-        .collect();
-    let mut ws = connect(&s.base).await;
-    hello(&mut ws, req.policy, 20_000).await;
-    ws.send(binary(&StreamClient::Pages)).await.unwrap();
-    ws.send(binary(&StreamClient::Observer(req.observer)))
-        .await
-        .unwrap();
-    let (segments, pages) = paged_frames(&mut ws, db, &stabs, 40).await;
-    assert!(
-        segments >= 5 && pages >= 1,
-        "{segments} segments, {pages} pages"
-    );
 }
