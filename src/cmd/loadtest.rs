@@ -229,7 +229,7 @@ fn stress(a: &Args, path: portico_data::path::CameraPath, policy: Policy) -> Res
         a.stress_seconds
     );
     println!(
-        "  {:>7} {:>9} {:>8} {:>7} {:>9} {:>9} {:>9} {:>14} {:>6}",
+        "  {:>7} {:>9} {:>8} {:>7} {:>9} {:>9} {:>9} {:>14} {:>11} {:>11} {:>6}",
         "clients",
         "requests",
         "req/s",
@@ -238,13 +238,16 @@ fn stress(a: &Args, path: portico_data::path::CameraPath, policy: Policy) -> Res
         "p99 ms",
         "max ms",
         "server mean ms",
+        "CPU/ans µs",
+        "lists made",
         "items"
     );
     let mut levels = Vec::new();
     for &n in &a.stress {
         let l = rt.block_on(level(&cfg, n.max(1)))?;
+        let or_dash = |v: Option<String>| v.unwrap_or_else(|| "-".into());
         println!(
-            "  {:>7} {:>9} {:>8.0} {:>7} {:>9.3} {:>9.3} {:>9.3} {:>14.3} {:>6.0}",
+            "  {:>7} {:>9} {:>8.0} {:>7} {:>9.3} {:>9.3} {:>9.3} {:>14.3} {:>11} {:>11} {:>6.0}",
             l.clients,
             l.requests,
             l.rps,
@@ -253,6 +256,8 @@ fn stress(a: &Args, path: portico_data::path::CameraPath, policy: Policy) -> Res
             l.latency_s.p99 * 1e3,
             l.latency_s.max * 1e3,
             l.server_compute_s.mean * 1e3,
+            or_dash(l.cpu_per_answer_s.map(|s| format!("{:.1}", s * 1e6))),
+            or_dash(l.lists_computed.map(|n| n.to_string())),
             l.items.mean
         );
         levels.push(l);

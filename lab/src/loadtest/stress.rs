@@ -7,8 +7,10 @@
 //! (as if every read had arrived), so the answers stay the size of a walking client's. With
 //! `paced` off, each client posts again as soon as its answer is in (a closed loop: the
 //! server's throughput). Latency is measured at the client, request written to answer decoded,
-//! over loopback HTTP/1.1 with keep-alive; the server's own compute time comes with each answer.
+//! over loopback HTTP/1.1 with keep-alive; the server's own compute time comes with each answer,
+//! and its CPU per answer and the need lists it computed from its `/metrics` around the level.
 
+use super::stress_stream::sample_server;
 use super::world::path_frames;
 use anyhow::{Context, Result};
 use portico_client::stats::Series;
@@ -56,6 +58,13 @@ pub struct StressLevel {
     pub server_compute_s: Series,
     /// Items per answer.
     pub items: Series,
+    /// Server CPU per answer (s), from its own `process_cpu_seconds_total` over the level
+    /// (`None`: the server does not report it).
+    pub cpu_per_answer_s: Option<f64>,
+    /// Need lists the server computed over the level (shared-cache misses; `None`: not
+    /// reported). With `portico serve --exact-answers` every answer is computed and none is
+    /// counted here.
+    pub lists_computed: Option<u64>,
 }
 
 /// Fails with a one-line error unless a server answers `GET /healthz` at `server`, so a stress
@@ -81,6 +90,9 @@ pub async fn reachable(server: &str) -> Result<()> {
 pub async fn level(cfg: &StressConfig, clients: usize) -> Result<StressLevel> {
     let frames = Arc::new(path_frames(&cfg.path, cfg.frame_s, 1e4));
     anyhow::ensure!(!frames.is_empty(), "the path has no frames");
+    let http = reqwest::Client::new();
+    let metrics = || sample_server(&http, &cfg.server, cfg.token.as_deref());
+    let before = metrics().await.ok();
     let start = Instant::now();
     let mut tasks = tokio::task::JoinSet::new();
     for i in 0..clients {
@@ -107,7 +119,17 @@ pub async fn level(cfg: &StressConfig, clients: usize) -> Result<StressLevel> {
         errors += c.errors;
     }
     let wall = start.elapsed().as_secs_f64();
+    let after = metrics().await.ok();
+    let (cpu_per_answer_s, lists_computed) = match (before, after) {
+        (Some(b), Some(a)) if a.answers > b.answers => (
+            Some((a.cpu_s - b.cpu_s) / (a.answers - b.answers)),
+            Some((a.misses - b.misses).max(0.0) as u64),
+        ),
+        _ => (None, None),
+    };
     Ok(StressLevel {
+        cpu_per_answer_s,
+        lists_computed,
         clients,
         requests: lat.len() as u64,
         errors,

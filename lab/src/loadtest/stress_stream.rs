@@ -177,9 +177,19 @@ impl ServerSample {
 }
 
 async fn sample(http: &reqwest::Client, cfg: &StreamStressConfig) -> Result<ServerSample> {
-    let url = format!("{}/metrics", cfg.server.trim_end_matches('/'));
+    sample_server(http, &cfg.server, cfg.token.as_deref()).await
+}
+
+/// The server's `/metrics` figures this harness reads (errors: unreachable, or a server too old
+/// to report its CPU time).
+pub async fn sample_server(
+    http: &reqwest::Client,
+    server: &str,
+    token: Option<&str>,
+) -> Result<ServerSample> {
+    let url = format!("{}/metrics", server.trim_end_matches('/'));
     let mut req = http.get(&url);
-    if let Some(t) = &cfg.token {
+    if let Some(t) = token {
         req = req.bearer_auth(t);
     }
     let text = req.send().await?.error_for_status()?.text().await?;
