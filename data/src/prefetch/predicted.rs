@@ -195,10 +195,11 @@ impl Prefetcher {
             }
             let k = first[&o];
             let bounds = &self.bounds[o as usize];
-            let nearest = eyes[k..]
+            let near: Vec<(u32, f32)> = eyes[k..]
                 .iter()
-                .map(|e| distance_to_box(e.at, bounds))
-                .fold(f32::INFINITY, f32::min);
+                .map(|e| (e.frames, distance_to_box(e.at, bounds)))
+                .collect();
+            let nearest = near.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
             let at = cands.len();
             claimed += self.add_object(
                 o,
@@ -210,48 +211,7 @@ impl Prefetcher {
                 &mut cands,
                 &mut claimed_mips,
             );
-            // Each finer LOD is needed from the first eye near enough for it (its deadline),
-            // the useful texture level with the finest LOD.
-            let finest = cands[at..]
-                .iter()
-                .filter(|c| c.item.kind == NeedKind::Geometry)
-                .map(|c| c.item.lod)
-                .min();
-            let lods = self
-                .db
-                .header()
-                .instances
-                .get(o as usize)
-                .map(|inst| self.db.header().lods_of(inst));
-            let needed_from = |lod: u8| -> u32 {
-                let Some(lods) = lods else {
-                    return eyes[k].frames;
-                };
-                eyes[k..]
-                    .iter()
-                    .find(|e| {
-                        let px = projected_pixels(
-                            bounds,
-                            distance_to_box(e.at, bounds),
-                            policy,
-                            obs.half_fov_y,
-                        );
-                        max_lod(lods, px, policy.size_threshold_px.max(0.0)) <= lod as usize
-                    })
-                    .map_or(eyes[k].frames, |e| e.frames)
-            };
-            for c in &mut cands[at..] {
-                let lod = match c.item.kind {
-                    NeedKind::Geometry => Some(c.item.lod),
-                    NeedKind::Mips if c.item.lod > 0 => finest,
-                    _ => None,
-                };
-                if let Some(lod) = lod {
-                    c.frames = needed_from(lod);
-                    c.item.frames = c.frames;
-                }
-                c.now = now.contains(&o);
-            }
+            self.time_lods(&mut cands[at..], o, &near, now.contains(&o), obs, policy);
             // §5.2.2 condition 2: memory is claimed, and everything visible now is in.
             if eyes[k].frames > 0 && claimed > policy.cache_bytes {
                 break;
@@ -268,6 +228,57 @@ impl Prefetcher {
             cands,
             cells.len() as u32,
         )))
+    }
+}
+
+impl Prefetcher {
+    /// Sets when each of object `o`'s candidates is needed: each finer LOD from the first
+    /// sample near enough for it (`near`: the samples from the object's first, as frames and
+    /// the distance to the object then; its deadline), the useful texture level with the finest
+    /// LOD; `now` marks it in view.
+    pub(super) fn time_lods(
+        &self,
+        cands: &mut [Candidate],
+        o: u32,
+        near: &[(u32, f32)],
+        now: bool,
+        obs: &Observer,
+        policy: &Policy,
+    ) {
+        let Some(&(first, _)) = near.first() else {
+            return;
+        };
+        let bounds = &self.bounds[o as usize];
+        let finest = cands
+            .iter()
+            .filter(|c| c.item.kind == NeedKind::Geometry)
+            .map(|c| c.item.lod)
+            .min();
+        let header = self.db.header();
+        let lods = header.instances.get(o as usize).map(|i| header.lods_of(i));
+        let needed_from = |lod: u8| -> u32 {
+            let Some(lods) = lods else {
+                return first;
+            };
+            near.iter()
+                .find(|&&(_, d)| {
+                    let px = projected_pixels(bounds, d, policy, obs.half_fov_y);
+                    max_lod(lods, px, policy.size_threshold_px.max(0.0)) <= lod as usize
+                })
+                .map_or(first, |&(f, _)| f)
+        };
+        for c in cands {
+            let lod = match c.item.kind {
+                NeedKind::Geometry => Some(c.item.lod),
+                NeedKind::Mips if c.item.lod > 0 => finest,
+                _ => None,
+            };
+            if let Some(lod) = lod {
+                c.frames = needed_from(lod);
+                c.item.frames = c.frames;
+            }
+            c.now = now;
+        }
     }
 }
 

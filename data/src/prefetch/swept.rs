@@ -26,7 +26,6 @@
 //! computes nothing while its observer stays in its place. On the tiny building it is 2.2
 //! times the bytes of the answers it holds (`data/tests/shared_predicted.rs`).
 
-use super::lookahead::{max_lod, projected_pixels};
 use super::range::{self, ObserverRange};
 use super::shared::direction_bucket_in;
 use super::{Budget, Candidate, Prefetcher, need};
@@ -351,11 +350,10 @@ impl Prefetcher {
             }
             let k = first[&o];
             let bounds = &self.bounds[o as usize];
-            let near: Vec<f32> = regions[k..]
-                .iter()
-                .map(|r| box_distance(r, bounds))
+            let near: Vec<(u32, f32)> = (k..regions.len())
+                .map(|j| (frames[j], box_distance(&regions[j], bounds)))
                 .collect();
-            let nearest = near.iter().copied().fold(f32::INFINITY, f32::min);
+            let nearest = near.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
             let at = cands.len();
             claimed += self.add_object(
                 o,
@@ -367,41 +365,7 @@ impl Prefetcher {
                 &mut cands,
                 &mut claimed_mips,
             );
-            let finest = cands[at..]
-                .iter()
-                .filter(|c| c.item.kind == NeedKind::Geometry)
-                .map(|c| c.item.lod)
-                .min();
-            let lods = self
-                .db
-                .header()
-                .instances
-                .get(o as usize)
-                .map(|inst| self.db.header().lods_of(inst));
-            // Each finer LOD from the first region near enough for it.
-            let needed_from = |lod: u8| -> u32 {
-                let Some(lods) = lods else {
-                    return frames[k];
-                };
-                near.iter()
-                    .position(|&d| {
-                        let px = projected_pixels(bounds, d, policy, obs.half_fov_y);
-                        max_lod(lods, px, policy.size_threshold_px.max(0.0)) <= lod as usize
-                    })
-                    .map_or(frames[k], |j| frames[k + j])
-            };
-            for c in &mut cands[at..] {
-                let lod = match c.item.kind {
-                    NeedKind::Geometry => Some(c.item.lod),
-                    NeedKind::Mips if c.item.lod > 0 => finest,
-                    _ => None,
-                };
-                if let Some(lod) = lod {
-                    c.frames = needed_from(lod);
-                    c.item.frames = c.frames;
-                }
-                c.now = k == 0;
-            }
+            self.time_lods(&mut cands[at..], o, &near, k == 0, obs, policy);
             // §5.2.2 condition 2, as for one observer.
             if k > 0 && claimed > policy.cache_bytes {
                 break;
