@@ -137,7 +137,12 @@ mod tests {
             .collect();
         assert!(own[..10].iter().all(|&o| o), "{own:?}");
         assert!(!own[10]);
+        // Nonsense times are not counted: still 10 a second (the next window).
         b.charge(f64::NAN);
         b.charge(-1.0);
+        let next: Vec<bool> = (0..11)
+            .map(|i| b.own_answer(t0 + Duration::from_millis(2000 + i)))
+            .collect();
+        assert!(next[..10].iter().all(|&o| o) && !next[10], "{next:?}");
     }
 }

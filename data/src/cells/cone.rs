@@ -116,7 +116,7 @@ fn edge_rays(planes: &[Plane]) -> Option<Vec<Vec3>> {
 }
 
 /// How far outside a cone a box may be and still meet it ([`cone_meets`]), metres.
-const MEETS_MARGIN: f32 = 2e-3;
+pub const MEETS_MARGIN: f32 = 2e-3;
 
 #[cfg(test)]
 mod tests {

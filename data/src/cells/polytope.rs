@@ -33,6 +33,11 @@ impl Plane {
 
     /// Whether any point of the closed box lies in the closed halfspace (within [`EPS`]).
     pub fn touches_box(&self, b: &Aabb) -> bool {
+        self.touches_box_within(b, EPS)
+    }
+
+    /// [`Plane::touches_box`] with the tolerance given (metres, for a unit normal).
+    pub fn touches_box_within(&self, b: &Aabb, tolerance: f32) -> bool {
         let n = Vec3::from(self.normal);
         // The box corner that minimises n · x.
         let corner = Vec3::new(
@@ -40,7 +45,7 @@ impl Plane {
             if n.y >= 0.0 { b.min[1] } else { b.max[1] },
             if n.z >= 0.0 { b.min[2] } else { b.max[2] },
         );
-        self.eval(corner) <= EPS * n.length().max(1.0)
+        self.eval(corner) <= tolerance * n.length().max(1.0)
     }
 }
 

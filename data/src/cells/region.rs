@@ -52,12 +52,14 @@ fn corners(b: &Aabb) -> [Vec3; 8] {
 /// The cells the box `eyes` (inside live cell `start`) may see through portals, each with the
 /// halfspaces of one portal sequence reaching it (a cell reached along several sequences is
 /// listed once per sequence); `start` first, whole. `None` past `max_sequences` portal
-/// sequences (the caller falls back to the cell-to-cell visibility, which holds it).
+/// sequences (the caller falls back to the cell-to-cell visibility, which holds it), or once
+/// `going` says to stop (asked every 64 sequences: a deadline).
 pub fn region_to_cell(
     graph: &CellGraph,
     start: u32,
     eyes: &Aabb,
     max_sequences: usize,
+    going: &mut dyn FnMut() -> bool,
 ) -> Option<Vec<RegionReached>> {
     let box_corners = corners(eyes);
     let mut out = vec![RegionReached {
@@ -68,7 +70,7 @@ pub fn region_to_cell(
     let mut followed = 0usize;
     while let Some((cell, planes, path)) = stack.pop() {
         followed += 1;
-        if followed > max_sequences {
+        if followed > max_sequences || (followed.is_multiple_of(64) && !going()) {
             return None;
         }
         for &p in &graph.cells[cell as usize].portals {
@@ -126,9 +128,13 @@ pub fn region_to_object(reached: &[RegionReached], stab: &StabList, objects: &[A
         let Some(entry) = stab.entry(r.cell) else {
             continue;
         };
+        // Within the exact test's margin (a box that close to a point's wedge counts as
+        // meeting it there, and a plane here may run along that wedge's edge).
         out.extend(entry.objects.iter().copied().filter(|&o| {
             let b = &objects[o as usize];
-            r.planes.iter().all(|p| p.touches_box(b))
+            r.planes
+                .iter()
+                .all(|p| p.touches_box_within(b, super::cone::MEETS_MARGIN))
         }));
     }
     out.sort_unstable();

@@ -176,9 +176,9 @@ impl Prefetcher {
             .filter(|&c| graph.cells[c as usize].live)?;
         let dir = Vec3::from(obs.dir);
         let (bucket, predicted) = if policy.lookahead_cull == LookaheadCull::Predicted {
-            if !dir.is_finite() {
-                return None;
-            }
+            // A view that does not normalize is no direction (the observer's own answer looks
+            // along -z and does not turn it): not bucketed.
+            dir.try_normalize()?;
             let fine = direction_bucket_in(dir, VIEW_AZIMUTH, VIEW_ELEVATION).0;
             (fine, Some(Motion::of(obs)?))
         } else {

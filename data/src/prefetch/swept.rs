@@ -20,9 +20,10 @@
 //!   and the turn band's drift, its apex stepped back until it holds the region (every cone
 //!   from a point inside a convex cone, opening no wider, lies inside it).
 //!
-//! So each object is listed from a frame no later, and at an LOD no coarser, than in any one
-//! observer's answer: the list holds the answer of every observer it serves (up to the cache
-//! bound where both stop; a texture's useful mip may be a finer one), and a stream session
+//! So each object and each of its geometry LODs is listed from a frame no later than in any
+//! one observer's answer, at an LOD no coarser: the list holds the answer of every observer it
+//! serves (up to the cache bound where both stop; a texture's useful mip may be a finer one,
+//! due with the finer LOD it goes with), and a stream session
 //! computes nothing while its observer stays in its place. On the tiny building it is 2.2
 //! times the bytes of the answers it holds (`data/tests/shared_predicted.rs`).
 
@@ -244,10 +245,17 @@ impl Prefetcher {
         let range = ObserverRange::for_cell(cell, &start, view, VIEW_SPREAD, obs, policy);
         let ranged = range::range_cells(graph, &range, policy.range_cull);
         budget.check()?;
+        // A cell the cube touches is entered now by an observer on its face (whose own range
+        // starts from both cells there): its stab list is needed at once.
         let stab_items: Vec<NeedItem> = ranged
             .iter()
             .filter_map(|&(c, frames)| {
                 let seg = self.stab_segment(c)?;
+                let frames = if touches(&graph.cells[c as usize].bounds, &start) {
+                    0
+                } else {
+                    frames
+                };
                 Some(need(
                     seg,
                     NeedKind::Stab,
@@ -283,17 +291,14 @@ impl Prefetcher {
             }
             budget.check()?;
             let stab = self.stab(c)?;
-            let objects = match region_to_cell(
-                graph,
-                c,
-                &intersect(&last, here),
-                std::env::var("MAXSEQ")
-                    .ok()
-                    .and_then(|v| v.parse().ok())
-                    .unwrap_or(MAX_EYE_SEQUENCES),
-            ) {
+            let eyes = intersect(&last, here);
+            let mut going = || !budget.spent();
+            let objects = match region_to_cell(graph, c, &eyes, MAX_EYE_SEQUENCES, &mut going) {
                 Some(reached) => region_to_object(&reached, &stab, &self.bounds),
-                None => stab.objects(),
+                None => {
+                    budget.check()?; // stopped for the deadline, not the bound
+                    stab.objects()
+                }
             };
             visible.insert(c, objects);
         }
