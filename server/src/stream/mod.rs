@@ -21,7 +21,9 @@
 //! costs a k-D descent and nothing else, a new place whose list some session already
 //! computed costs a cache lookup, and only a new place nobody has asked for is computed. What
 //! is left to push is the list past a cursor, minus the mirror: no per-session copy of it.
-//! A database without cells falls back to one computation per observer.
+//! A database without cells falls back to one computation per observer. A shared list is wider
+//! than an observer's own, so while the server could answer every observer with its own within
+//! a share of its compute slots, each gets its own (`crate::answers`); a crowd shares.
 //!
 //! A session cannot take more than its share:
 //! - observers are coalesced: only the latest one is computed, on a compute slot within the
