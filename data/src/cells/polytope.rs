@@ -141,6 +141,81 @@ fn order_around_centroid(points: Vec<Vec3>, normal: Vec3) -> Vec<Vec3> {
     keyed.into_iter().map(|(_, q)| q).collect()
 }
 
+/// The edges of a convex polygon of `n` corners in order.
+pub fn ring(n: usize) -> Vec<(usize, usize)> {
+    (0..n).map(|i| (i, (i + 1) % n)).collect()
+}
+
+/// Planes through an edge of one convex set and a corner of the other with the two on opposite
+/// sides, as halfspaces containing `b`'s side: every line through a point of `a` and then a
+/// point of `b` goes on inside each of them (the anti-penumbra's bounding planes, Teller 1992).
+/// `a` and `b` are corner lists with their edges as index pairs.
+pub fn separating_planes_of(
+    a: &[Vec3],
+    a_edges: &[(usize, usize)],
+    b: &[Vec3],
+    b_edges: &[(usize, usize)],
+) -> Vec<Plane> {
+    let mut out = Vec::new();
+    for (from, edges, to) in [(a, a_edges, b), (b, b_edges, a)] {
+        for &(i, j) in edges {
+            let (e0, e1) = (from[i], from[j]);
+            for &w in to {
+                let n = (e1 - e0).cross(w - e0);
+                if n.length_squared() < 1e-10 {
+                    continue;
+                }
+                let n = n.normalize();
+                let d = n.dot(e0);
+                const T: f32 = 1e-5;
+                // The range of a set's signed distances; `None` as soon as it has points on
+                // both sides (the common case: the plane separates nothing).
+                let side = |pts: &[Vec3]| {
+                    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+                    for p in pts {
+                        let s = n.dot(*p) - d;
+                        lo = lo.min(s);
+                        hi = hi.max(s);
+                        if lo < -T && hi > T {
+                            return None;
+                        }
+                    }
+                    Some((lo, hi))
+                };
+                let Some((alo, ahi)) = side(a) else {
+                    continue;
+                };
+                let Some((blo, bhi)) = side(b) else {
+                    continue;
+                };
+                // a on the negative side, b on the positive: keep n · x >= d, i.e. (-n) · x <= -d.
+                let plane = if ahi <= T && blo >= -T && (alo < -T || bhi > T) {
+                    Plane {
+                        normal: (-n).into(),
+                        d: -d,
+                    }
+                } else if alo >= -T && bhi <= T && (ahi > T || blo < -T) {
+                    Plane {
+                        normal: n.into(),
+                        d,
+                    }
+                } else {
+                    continue;
+                };
+                // The same plane through several edges and corners is kept once.
+                let same = |q: &Plane| {
+                    (0..3).all(|k| (q.normal[k] - plane.normal[k]).abs() < 1e-6)
+                        && (q.d - plane.d).abs() < 1e-5
+                };
+                if !out.iter().any(same) {
+                    out.push(plane);
+                }
+            }
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

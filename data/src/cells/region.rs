@@ -9,8 +9,7 @@
 //! keeps: the shared predicted lookahead (`crate::prefetch::swept`) uses it for the regions
 //! its observers' predicted eyes may be in.
 
-use super::polytope::{Plane, clip_polygon};
-use super::stab::{ring, separating_planes_of};
+use super::polytope::{Plane, clip_polygon, ring, separating_planes_of};
 use super::{CellGraph, StabList};
 use crate::geometry::Aabb;
 use glam::Vec3;
