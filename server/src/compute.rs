@@ -40,23 +40,40 @@ impl Compute {
         self.count
     }
 
+    /// The answer to an asker whose deadline passed before its computation was done (503).
+    pub fn busy(&self) -> Error {
+        Error::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            "busy",
+            format!(
+                "the server could not compute this answer within {} ms; retry",
+                self.deadline.as_millis()
+            ),
+        )
+    }
+
+    /// When a computation asked for now must be done.
+    pub fn deadline_from_now(&self) -> Instant {
+        Instant::now() + self.deadline
+    }
+
     /// Runs `f` on the blocking pool within the deadline; `f` gets the [`Budget`] to check.
     pub async fn run<T, F>(&self, f: F) -> Result<T, Error>
     where
         T: Send + 'static,
         F: FnOnce(Budget) -> Result<T, Error> + Send + 'static,
     {
-        let until = Instant::now() + self.deadline;
-        let busy = || {
-            Error::new(
-                StatusCode::SERVICE_UNAVAILABLE,
-                "busy",
-                format!(
-                    "the server could not compute this answer within {} ms; retry",
-                    self.deadline.as_millis()
-                ),
-            )
-        };
+        self.run_until(self.deadline_from_now(), f).await
+    }
+
+    /// [`Compute::run`] with the deadline `until` (an asker that waited for something else
+    /// first: `crate::inflight`).
+    pub async fn run_until<T, F>(&self, until: Instant, f: F) -> Result<T, Error>
+    where
+        T: Send + 'static,
+        F: FnOnce(Budget) -> Result<T, Error> + Send + 'static,
+    {
+        let busy = || self.busy();
         let permit =
             match tokio::time::timeout_at(until.into(), self.slots.clone().acquire_owned()).await {
                 Ok(Ok(p)) => p,

@@ -23,6 +23,7 @@ mod config;
 mod encoding;
 mod error;
 mod guard;
+mod inflight;
 mod listen;
 mod metrics;
 mod pages;

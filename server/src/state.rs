@@ -22,6 +22,8 @@ pub struct AppState {
     pub compute: Compute,
     /// The CPU observers' own answers may take before answers are shared.
     pub exact: crate::answers::ExactBudget,
+    /// The shared need lists being computed now (one computation per list: `crate::inflight`).
+    pub lists: crate::inflight::InFlight<portico_data::prefetch::shared::ShareKey>,
     /// Counters and histograms (kept across reloads: [`AppState::open_after`]).
     pub metrics: Arc<Metrics>,
     /// Strong identifier of the file's contents (the manifest's ETag).
@@ -136,6 +138,7 @@ impl AppState {
                 config_slots,
                 std::time::Instant::now(),
             ),
+            lists: Default::default(),
             config,
             metrics,
             database_id,

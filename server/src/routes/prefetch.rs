@@ -5,6 +5,7 @@
 
 use super::Shared;
 use crate::error::Error;
+use crate::inflight::Turn;
 use crate::respond::{current, decode_body, encoded, wants_bincode};
 use crate::validate::validate;
 use axum::body::Bytes;
@@ -32,7 +33,8 @@ pub async fn prefetch_in(
 pub const INLINE_BYTES: usize = 16 << 10;
 
 /// `POST /v1/prefetch`: Funkhouser §5.2's lookahead for one observer. A small request whose
-/// place's shared list is cached is answered at once ([`INLINE_BYTES`]); otherwise decoding,
+/// place's shared list is cached is answered at once ([`INLINE_BYTES`]), and one whose list
+/// another request is computing waits for it without a compute slot; otherwise decoding,
 /// checking, answering and encoding run on a compute slot within the prefetch deadline
 /// ([`crate::compute`]), never on the async workers.
 pub async fn prefetch(
@@ -42,7 +44,11 @@ pub async fn prefetch(
 ) -> Result<Response, Error> {
     let body = body.map_err(|e| Error::new(e.status(), "body", e.body_text()))?;
     let b = wants_bincode(&headers);
+    let until = s.compute.deadline_from_now();
     let mut decoded = None;
+    // Held while this request computes its place's list: others of the place wait for it
+    // without a compute slot (`crate::inflight`).
+    let mut _lead = None;
     if body.len() <= INLINE_BYTES {
         let req: PrefetchRequest = decode_body(&headers, &body)?;
         let held = validate(&req, s.db().segments().len())?;
@@ -51,18 +57,24 @@ pub async fn prefetch(
         let key = sharing
             .then(|| p.share_key(&req.observer, &req.policy))
             .flatten();
-        if let Some(list) = key.as_ref().and_then(|k| p.shared_cached(k)) {
-            let t0 = std::time::Instant::now();
-            let mut answer = list.cut(&held, req.policy.read_bytes);
-            answer.micros = t0.elapsed().as_micros().min(u32::MAX as u128) as u32;
-            return Ok(encoded(b, Bytes::from(encode(&s, &answer, b)?), None));
+        if let Some(k) = &key {
+            match s.lists.turn(k, until, || p.shared_cached(k)).await {
+                None => return Err(s.compute.busy()),
+                Some(Turn::Ready(list)) => {
+                    let t0 = std::time::Instant::now();
+                    let mut answer = list.cut(&held, req.policy.read_bytes);
+                    answer.micros = t0.elapsed().as_micros().min(u32::MAX as u128) as u32;
+                    return Ok(encoded(b, Bytes::from(encode(&s, &answer, b)?), None));
+                }
+                Some(Turn::Lead(lead)) => _lead = Some(lead),
+            }
         }
         decoded = Some((req, held, key));
     }
     let state = s.clone();
     let bytes = s
         .compute
-        .run(move |budget| {
+        .run_until(until, move |budget| {
             let (req, held, key) = match decoded {
                 Some(d) => d,
                 None => {

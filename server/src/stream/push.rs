@@ -4,7 +4,9 @@
 //! wait for the next list (Funkhouser §5.2.3 with deadlines), paced to the session's rate.
 
 use super::{Computing, PACING_BURST, Pending, Session, control, secs};
+use crate::AppState;
 use crate::error::Error;
+use crate::inflight::Turn;
 use axum::extract::ws::Message;
 use axum::http::StatusCode;
 use portico_data::deadline::{MARGIN_FRAMES, cannot_wait};
@@ -29,10 +31,26 @@ impl Session {
         let key = place.map(|p| ShareKey::new(p, self.policy_bytes.clone()));
         let paged = self.paged;
         Box::pin(async move {
+            // One computation per place's list: a session whose place another is computing
+            // waits for it without a compute slot (`crate::inflight`).
+            let until = state.compute.deadline_from_now();
+            let mut _lead = None;
+            if let Some(k) = &key {
+                let cached = || state.prefetcher.shared_cached(k);
+                match state.lists.turn(k, until, cached).await {
+                    None => return Err(state.compute.busy()),
+                    Some(Turn::Ready(list)) if !paged || pages_made(&state, &list) => {
+                        return Ok(list);
+                    }
+                    // Cached, but its pages are made on a slot below.
+                    Some(Turn::Ready(_)) => {}
+                    Some(Turn::Lead(lead)) => _lead = Some(lead),
+                }
+            }
             let s = state.clone();
             state
                 .compute
-                .run(move |budget| {
+                .run_until(until, move |budget| {
                     let p = &s.prefetcher;
                     let list = match &key {
                         Some(k) => p.shared_list(k, &obs, &policy, &budget),
@@ -106,7 +124,7 @@ impl Session {
             // A paged session takes a cached list only once its stab lists' pages are made
             // (else the computation, on a compute slot, makes them).
             if let Some(list) = self.state.prefetcher.shared_cached(&key)
-                && (!self.paged || self.pages_made(&list))
+                && (!self.paged || pages_made(&self.state, &list))
             {
                 m.update(arrived.elapsed().as_secs_f64(), updates);
                 return self.take_list(list, place, arrived);
@@ -121,17 +139,6 @@ impl Session {
             generation: self.generation,
         });
         None
-    }
-
-    /// Whether the pages of the first [`PAGES_PER_UPDATE`] stab lists in `list` are made
-    /// ([`AppState::page_frame`]): what a computation would make.
-    fn pages_made(&self, list: &NeedList) -> bool {
-        list.items
-            .iter()
-            .filter(|i| i.kind == NeedKind::Stab)
-            .filter_map(|i| self.state.stab_cells.get(&i.segment))
-            .take(PAGES_PER_UPDATE)
-            .all(|&c| self.state.page_frame(c).is_some())
     }
 
     /// A computation finished: its list is taken unless it is stale (another place is wanted
@@ -291,4 +298,15 @@ impl Session {
         self.recheck = now + secs(dt / 2.0);
         None
     }
+}
+
+/// Whether the pages of the first [`PAGES_PER_UPDATE`] stab lists in `list` are made
+/// ([`AppState::page_frame`]): what a computation would make.
+fn pages_made(state: &AppState, list: &NeedList) -> bool {
+    list.items
+        .iter()
+        .filter(|i| i.kind == NeedKind::Stab)
+        .filter_map(|i| state.stab_cells.get(&i.segment))
+        .take(PAGES_PER_UPDATE)
+        .all(|&c| state.page_frame(c).is_some())
 }
