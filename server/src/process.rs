@@ -4,6 +4,7 @@
 //! from Linux's `/proc/self/status`; where either is missing its line is left out.
 
 use portico_data::prefetch::shared::SharedAnswers;
+use portico_data::prefetch::sight::RegionSight;
 use std::fmt::Write;
 use std::sync::atomic::Ordering::Relaxed;
 
@@ -37,7 +38,7 @@ pub fn resident_bytes() -> Option<u64> {
 
 /// Appends the process and shared-cache lines in Prometheus text; `sharing` says whether
 /// stream sessions share need lists (`portico serve` without `--exact-answers`).
-pub fn render(out: &mut String, shared: &SharedAnswers, sharing: bool) {
+pub fn render(out: &mut String, shared: &SharedAnswers, sight: &RegionSight, sharing: bool) {
     let mut line = |name: &str, kind: &str, help: &str, v: f64| {
         let _ = writeln!(
             out,
@@ -91,6 +92,18 @@ pub fn render(out: &mut String, shared: &SharedAnswers, sharing: bool) {
         "Bytes of need lists in the shared cache.",
         bytes as f64,
     );
+    line(
+        "portico_region_sight_hits_total",
+        "counter",
+        "What a cell's part of a swept region may see, taken from the cache.",
+        sight.hits.load(Relaxed) as f64,
+    );
+    line(
+        "portico_region_sight_misses_total",
+        "counter",
+        "What a cell's part of a swept region may see, searched.",
+        sight.misses.load(Relaxed) as f64,
+    );
 }
 
 #[cfg(test)]
@@ -113,9 +126,15 @@ mod tests {
         let rss = resident_bytes().unwrap();
         assert!((1 << 20..1 << 36).contains(&rss), "{rss}");
         let mut s = String::new();
-        render(&mut s, &SharedAnswers::new(1 << 20), true);
+        render(
+            &mut s,
+            &SharedAnswers::new(1 << 20),
+            &RegionSight::default(),
+            true,
+        );
         assert!(s.contains("process_cpu_seconds_total "));
         assert!(s.contains("portico_shared_misses_total 0"));
         assert!(s.contains("portico_shared_answers 1\n"));
+        assert!(s.contains("portico_region_sight_misses_total 0\n"));
     }
 }

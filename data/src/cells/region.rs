@@ -9,7 +9,7 @@
 //! keeps: the shared predicted lookahead (`crate::prefetch::swept`) uses it for the regions
 //! its observers' predicted eyes may be in.
 
-use super::polytope::{Plane, clip_polygon, ring, separating_planes_of};
+use super::polytope::{Plane, box_separating_planes, clip_polygon};
 use super::{CellGraph, StabList};
 use crate::geometry::Aabb;
 use glam::Vec3;
@@ -24,30 +24,6 @@ pub struct RegionReached {
     pub planes: Vec<Plane>,
 }
 
-/// The twelve edges of a box's corners as [`corners`] orders them.
-const BOX_EDGES: [(usize, usize); 12] = [
-    (0, 1),
-    (2, 3),
-    (4, 5),
-    (6, 7),
-    (0, 2),
-    (1, 3),
-    (4, 6),
-    (5, 7),
-    (0, 4),
-    (1, 5),
-    (2, 6),
-    (3, 7),
-];
-
-/// A box's eight corners (bit 0: x, bit 1: y, bit 2: z at the maximum).
-fn corners(b: &Aabb) -> [Vec3; 8] {
-    std::array::from_fn(|i| {
-        let pick = |k: usize| if i >> k & 1 == 1 { b.max[k] } else { b.min[k] };
-        Vec3::new(pick(0), pick(1), pick(2))
-    })
-}
-
 /// The cells the box `eyes` (inside live cell `start`) may see through portals, each with the
 /// halfspaces of one portal sequence reaching it (a cell reached along several sequences is
 /// listed once per sequence); `start` first, whole. `None` past `max_sequences` portal
@@ -60,7 +36,6 @@ pub fn region_to_cell(
     max_sequences: usize,
     going: &mut dyn FnMut() -> bool,
 ) -> Option<Vec<RegionReached>> {
-    let box_corners = corners(eyes);
     let mut out = vec![RegionReached {
         cell: start,
         planes: Vec::new(),
@@ -100,12 +75,7 @@ pub fn region_to_cell(
                 normal: n.into(),
                 d: -dir * portal.plane(),
             });
-            narrowed.extend(separating_planes_of(
-                &box_corners,
-                &BOX_EDGES,
-                &poly,
-                &ring(poly.len()),
-            ));
+            narrowed.extend(box_separating_planes(eyes, &poly));
             out.push(RegionReached {
                 cell: next,
                 planes: narrowed.clone(),

@@ -18,6 +18,7 @@ pub mod lookahead;
 pub mod predicted;
 pub mod range;
 pub mod shared;
+pub mod sight;
 pub mod swept;
 
 use crate::Database;
@@ -110,6 +111,7 @@ pub struct Prefetcher {
     /// for a client holding textures as RGBA8 (`[0]`) and block-compressed (`[1]`).
     decoded: [Vec<u64>; 2],
     shared: shared::SharedAnswers,
+    sight: sight::RegionSight,
 }
 
 impl std::fmt::Debug for Prefetcher {
@@ -147,6 +149,7 @@ impl Prefetcher {
             bounds,
             decoded,
             shared: shared::SharedAnswers::new(shared::DEFAULT_CACHE_BYTES),
+            sight: sight::RegionSight::default(),
         })
     }
 

@@ -314,6 +314,11 @@ impl Prefetcher {
         &self.shared
     }
 
+    /// What swept regions may see, kept across places ([`super::sight`]; its counters).
+    pub fn region_sight(&self) -> &super::sight::RegionSight {
+        &self.sight
+    }
+
     /// What any observer of the shared range may see now: the objects the cell's stab list
     /// lists, in a view cone opened by the bucket's spread and stepped back to hold the cell
     /// (a superset of each observer's eye-to-object set, §4.1.2).

@@ -29,6 +29,7 @@
 
 use super::range::{self, ObserverRange};
 use super::shared::direction_bucket_in;
+use super::sight::sight_key;
 use super::{Budget, Candidate, Prefetcher, need};
 use crate::cells::realtime::{Frustum, MAX_EYE_SEQUENCES};
 use crate::cells::region::{region_to_cell, region_to_object};
@@ -283,23 +284,29 @@ impl Prefetcher {
         // What each cell's part of the last (largest) region may see through portals: every
         // predicted eye in the cell is in it. Past the search's bound, the cell's whole stab
         // list.
-        let mut visible: HashMap<u32, Vec<u32>> = HashMap::new();
+        let mut visible: HashMap<u32, std::sync::Arc<[u32]>> = HashMap::new();
         for &c in &cells {
             let here = &graph.cells[c as usize].bounds;
             if !touches(here, &last) {
                 continue;
             }
             budget.check()?;
-            let stab = self.stab(c)?;
             let eyes = intersect(&last, here);
-            let mut going = || !budget.spent();
-            let objects = match region_to_cell(graph, c, &eyes, MAX_EYE_SEQUENCES, &mut going) {
-                Some(reached) => region_to_object(&reached, &stab, &self.bounds),
-                None => {
-                    budget.check()?; // stopped for the deadline, not the bound
-                    stab.objects()
-                }
-            };
+            // The same box for every view and turn of this cube and velocity: searched once
+            // ([`super::sight`]).
+            let objects = self.sight.get_or(sight_key(c, &eyes), || {
+                let stab = self.stab(c)?;
+                let mut going = || !budget.spent();
+                Ok(
+                    match region_to_cell(graph, c, &eyes, MAX_EYE_SEQUENCES, &mut going) {
+                        Some(reached) => region_to_object(&reached, &stab, &self.bounds),
+                        None => {
+                            budget.check()?; // stopped for the deadline, not the bound
+                            stab.objects()
+                        }
+                    },
+                )
+            })?;
             visible.insert(c, objects);
         }
 

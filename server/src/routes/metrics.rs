@@ -11,6 +11,7 @@ pub async fn metrics(State(s): Shared) -> impl IntoResponse {
     crate::process::render(
         &mut text,
         s.prefetcher.shared_answers(),
+        s.prefetcher.region_sight(),
         s.config.shared_answers,
     );
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], text)
