@@ -71,7 +71,7 @@ impl Default for Config {
             header_timeout: Duration::from_secs(10),
             drain: Duration::from_secs(10),
             shared_answers: true,
-            exact_share: 0.1,
+            exact_share: 0.3,
             shared_cache_bytes: portico_data::prefetch::shared::DEFAULT_CACHE_BYTES,
             viewer: None,
         }

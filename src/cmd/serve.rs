@@ -54,7 +54,7 @@ pub struct Args {
     viewer: Option<PathBuf>,
     /// The share of the compute slots observers' own answers may take before answers are
     /// shared by place (a few clients get their own, a crowd shares; 0: always shared).
-    #[arg(long, default_value_t = 0.1, value_name = "FRACTION")]
+    #[arg(long, default_value_t = 0.3, value_name = "FRACTION")]
     exact_share: f64,
     /// Memory for the stream sessions' shared need lists, MB.
     #[arg(long, default_value_t = 256)]
