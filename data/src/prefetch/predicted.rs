@@ -186,37 +186,15 @@ impl Prefetcher {
                 }
             }
         }
-        let mut cands = Vec::new();
-        let mut claimed = 0u64;
-        let mut claimed_mips = HashSet::new();
-        for (i, &o) in order.iter().enumerate() {
-            if i % 1024 == 0 {
-                budget.check()?;
-            }
-            let k = first[&o];
-            let bounds = &self.bounds[o as usize];
-            let near: Vec<(u32, f32)> = eyes[k..]
-                .iter()
-                .map(|e| (e.frames, distance_to_box(e.at, bounds)))
-                .collect();
-            let nearest = near.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
-            let at = cands.len();
-            claimed += self.add_object(
-                o,
-                eyes[k].frames,
-                Some(nearest),
-                range,
-                obs.half_fov_y,
-                policy,
-                &mut cands,
-                &mut claimed_mips,
-            );
-            self.time_lods(&mut cands[at..], o, &near, now.contains(&o), obs, policy);
-            // §5.2.2 condition 2: memory is claimed, and everything visible now is in.
-            if eyes[k].frames > 0 && claimed > policy.cache_bytes {
-                break;
-            }
-        }
+        let sample_frames: Vec<u32> = eyes.iter().map(|e| e.frames).collect();
+        let cands = self.timed_candidates(
+            (&order, &first),
+            &sample_frames,
+            |j, b| distance_to_box(eyes[j].at, b),
+            |o, _| now.contains(&o),
+            (range, obs, policy),
+            budget,
+        )?;
         let stab_items = if policy.impostors {
             self.with_textures(stab_items, &cands, &range.eyes)
         } else {
@@ -232,6 +210,54 @@ impl Prefetcher {
 }
 
 impl Prefetcher {
+    /// The candidates of the objects in `order`, object `o` first seen at sample `first[o]`
+    /// (`frames[k]`: sample `k`'s frames ahead), each at the finest LOD the size threshold
+    /// allows at its nearest sample from then on (`distance(j, bounds)`: metres from sample
+    /// `j`), its finer LODs timed by [`Prefetcher::time_lods`] (`in_view(o, k)`: in view now);
+    /// until memory is claimed past the cache once everything visible now is in (Funkhouser
+    /// §5.2.2 condition 2). One observer's lookahead and a place's ([`super::swept`]) both end
+    /// here.
+    pub(super) fn timed_candidates(
+        &self,
+        (order, first): (&[u32], &HashMap<u32, usize>),
+        frames: &[u32],
+        distance: impl Fn(usize, &crate::geometry::Aabb) -> f32,
+        in_view: impl Fn(u32, usize) -> bool,
+        (range, obs, policy): (&ObserverRange, &Observer, &Policy),
+        budget: &Budget,
+    ) -> Result<Vec<Candidate>> {
+        let mut cands = Vec::new();
+        let mut claimed = 0u64;
+        let mut claimed_mips = HashSet::new();
+        for (i, &o) in order.iter().enumerate() {
+            if i % 1024 == 0 {
+                budget.check()?;
+            }
+            let k = first[&o];
+            let bounds = &self.bounds[o as usize];
+            let near: Vec<(u32, f32)> = (k..frames.len())
+                .map(|j| (frames[j], distance(j, bounds)))
+                .collect();
+            let nearest = near.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
+            let at = cands.len();
+            claimed += self.add_object(
+                o,
+                frames[k],
+                Some(nearest),
+                range,
+                obs.half_fov_y,
+                policy,
+                &mut cands,
+                &mut claimed_mips,
+            );
+            self.time_lods(&mut cands[at..], o, &near, in_view(o, k), obs, policy);
+            if frames[k] > 0 && claimed > policy.cache_bytes {
+                break;
+            }
+        }
+        Ok(cands)
+    }
+
     /// Sets when each of object `o`'s candidates is needed: each finer LOD from the first
     /// sample near enough for it (`near`: the samples from the object's first, as frames and
     /// the distance to the object then; its deadline), the useful texture level with the finest

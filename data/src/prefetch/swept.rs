@@ -353,36 +353,14 @@ impl Prefetcher {
             }
         }
 
-        let mut cands = Vec::new();
-        let mut claimed = 0u64;
-        let mut claimed_mips = HashSet::new();
-        for (i, &o) in order.iter().enumerate() {
-            if i % 1024 == 0 {
-                budget.check()?;
-            }
-            let k = first[&o];
-            let bounds = &self.bounds[o as usize];
-            let near: Vec<(u32, f32)> = (k..regions.len())
-                .map(|j| (frames[j], box_distance(&regions[j], bounds)))
-                .collect();
-            let nearest = near.iter().map(|n| n.1).fold(f32::INFINITY, f32::min);
-            let at = cands.len();
-            claimed += self.add_object(
-                o,
-                frames[k],
-                Some(nearest),
-                &range,
-                obs.half_fov_y,
-                policy,
-                &mut cands,
-                &mut claimed_mips,
-            );
-            self.time_lods(&mut cands[at..], o, &near, k == 0, obs, policy);
-            // §5.2.2 condition 2, as for one observer.
-            if k > 0 && claimed > policy.cache_bytes {
-                break;
-            }
-        }
+        let cands = self.timed_candidates(
+            (&order, &first),
+            &frames,
+            |j, b| box_distance(&regions[j], b),
+            |_, k| k == 0,
+            (&range, obs, policy),
+            budget,
+        )?;
         let stab_items = if policy.impostors {
             self.with_textures(stab_items, &cands, &range.eyes)
         } else {
