@@ -79,14 +79,15 @@ impl ExactBudget {
             return false;
         }
         let mut r = self.state.lock().unwrap_or_else(|e| e.into_inner());
-        let since = now.saturating_duration_since(r.start);
+        let mut since = now.saturating_duration_since(r.start);
         if since >= WINDOW {
             r.asked_before = if since < 2 * WINDOW { r.asked } else { 0 };
             r.asked = 0;
             r.start = now;
+            since = Duration::ZERO;
         }
         r.asked += 1;
-        let span = since.min(WINDOW).max(MIN_SPAN).as_secs_f64();
+        let span = since.max(MIN_SPAN).as_secs_f64();
         let per_s = (r.asked as f64 / span).max(r.asked_before as f64 / WINDOW.as_secs_f64());
         per_s * r.cost <= self.allowed
     }

@@ -12,49 +12,48 @@
 
 use std::collections::HashMap;
 use std::hash::Hash;
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use tokio::sync::watch;
 
 /// The lists being computed now, by key.
 #[derive(Debug)]
 pub struct InFlight<K> {
-    computing: Mutex<HashMap<K, watch::Receiver<()>>>,
+    computing: Computing<K>,
 }
+
+/// Each key being computed and the receiver its waiters clone.
+type Computing<K> = Arc<Mutex<HashMap<K, watch::Receiver<()>>>>;
 
 impl<K> Default for InFlight<K> {
     fn default() -> Self {
         InFlight {
-            computing: Mutex::new(HashMap::new()),
+            computing: Arc::default(),
         }
     }
 }
 
 /// What an asker does: take the list, or compute it (holding the [`Lead`] until it is cached
-/// or has failed).
+/// or has failed: the computation itself holds it, so the waiters wake as soon as it ends).
 #[derive(Debug)]
-pub enum Turn<'a, K: Hash + Eq + Clone, V> {
+pub enum Turn<K: Hash + Eq + Clone, V> {
     /// The list, from the cache.
     Ready(V),
     /// Nobody is computing it: this asker does, and the others wait until `Lead` is dropped.
-    Lead(Lead<'a, K>),
+    Lead(Lead<K>),
 }
 
 /// The leader's claim on a key; dropping it wakes the waiters.
 #[derive(Debug)]
-pub struct Lead<'a, K: Hash + Eq + Clone> {
-    owner: &'a InFlight<K>,
+pub struct Lead<K: Hash + Eq + Clone> {
+    computing: Computing<K>,
     key: K,
     _wake: watch::Sender<()>,
 }
 
-impl<K: Hash + Eq + Clone> Drop for Lead<'_, K> {
+impl<K: Hash + Eq + Clone> Drop for Lead<K> {
     fn drop(&mut self) {
-        let mut m = self
-            .owner
-            .computing
-            .lock()
-            .unwrap_or_else(|e| e.into_inner());
+        let mut m = self.computing.lock().unwrap_or_else(|e| e.into_inner());
         m.remove(&self.key);
         // `_wake` drops after this: every waiter's `changed()` returns.
     }
@@ -69,7 +68,7 @@ impl<K: Hash + Eq + Clone> InFlight<K> {
         key: &K,
         until: Instant,
         cached: impl Fn() -> Option<V>,
-    ) -> Option<Turn<'_, K, V>> {
+    ) -> Option<Turn<K, V>> {
         loop {
             if let Some(v) = cached() {
                 return Some(Turn::Ready(v));
@@ -81,11 +80,18 @@ impl<K: Hash + Eq + Clone> InFlight<K> {
                     None => {
                         let (tx, rx) = watch::channel(());
                         m.insert(key.clone(), rx);
-                        return Some(Turn::Lead(Lead {
-                            owner: self,
+                        drop(m);
+                        let lead = Lead {
+                            computing: self.computing.clone(),
                             key: key.clone(),
                             _wake: tx,
-                        }));
+                        };
+                        // A leader may have cached it and left between the first look and
+                        // the claim: then there is nothing to compute.
+                        return Some(match cached() {
+                            Some(v) => Turn::Ready(v),
+                            None => Turn::Lead(lead),
+                        });
                     }
                 }
             };
@@ -184,6 +190,19 @@ mod tests {
         assert_eq!(first.await.unwrap(), None);
         assert_eq!(second.await.unwrap(), Some(30));
         assert_eq!(l.computed.load(SeqCst), 2);
+    }
+
+    #[tokio::test]
+    async fn a_claim_on_a_list_cached_meanwhile_computes_nothing() {
+        // The cache is empty at the first look and full at the second (a leader cached the
+        // list and left in between): the asker takes it instead of leading.
+        let looks = AtomicUsize::new(0);
+        let l = InFlight::<u32>::default();
+        let cached = || (looks.fetch_add(1, SeqCst) > 0).then_some(5u8);
+        let Some(Turn::Ready(5)) = l.turn(&1, Instant::now(), cached).await else {
+            panic!("a list cached meanwhile is taken");
+        };
+        assert_eq!(l.len(), 0);
     }
 
     #[tokio::test]

@@ -3,10 +3,11 @@
 //! A place's list ([`super::swept`]) asks, for each cell its walk may reach, which objects an
 //! eye in the cell's part of the last swept region may see (region-to-cell visibility, then
 //! region-to-object: [`crate::cells::region`]). That region depends only on the place's cube,
-//! velocity bucket and speed band, not on its view or turn, so the places a walker passes
+//! velocity bucket and speed band (and the lookahead's depth), not on its view or turn, so the places a walker passes
 //! through while it turns its head ask the same question of the same box again. The answer is
-//! a pure function of the cell and the box, kept here (least recently used dropped first past
-//! [`SIGHT_CACHE_IDS`] object ids); a search stopped by its deadline is not kept.
+//! a pure function of the cell and the box (whatever policy made the box), kept here (least
+//! recently used dropped first past [`SIGHT_CACHE_IDS`] object ids, each answer counted
+//! [`ENTRY_IDS`] more for its key and node); a search stopped by its deadline is not kept.
 
 use lru::LruCache;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
@@ -14,6 +15,10 @@ use std::sync::{Arc, Mutex};
 
 /// Object ids the cache holds at most (4 bytes each: 16 MiB).
 pub const SIGHT_CACHE_IDS: usize = 4 << 20;
+
+/// What an answer costs beyond its ids (its key, `Arc` and LRU node: about 128 bytes), in ids:
+/// an empty answer is not free.
+pub const ENTRY_IDS: usize = 32;
 
 /// A cell and the exact bits of the box of eyes in it.
 pub(super) type SightKey = (u32, [u32; 6]);
@@ -61,12 +66,12 @@ impl RegionSight {
         let seen: Arc<[u32]> = search()?.into();
         let mut g = self.lock();
         if let Some(old) = g.0.put(key, seen.clone()) {
-            g.1 -= old.len();
+            g.1 -= old.len() + ENTRY_IDS;
         }
-        g.1 += seen.len();
+        g.1 += seen.len() + ENTRY_IDS;
         while g.1 > SIGHT_CACHE_IDS {
             let Some((_, l)) = g.0.pop_lru() else { break };
-            g.1 -= l.len();
+            g.1 -= l.len() + ENTRY_IDS;
         }
         Ok(seen)
     }
@@ -111,5 +116,25 @@ mod tests {
         assert_eq!(&*again, &[9]);
         assert_eq!(s.hits.load(Relaxed), 2);
         assert_eq!(s.misses.load(Relaxed), 3);
+    }
+
+    #[test]
+    fn empty_answers_count_too() {
+        // Answers with no objects still take memory: past the bound, the oldest go.
+        let s = RegionSight::default();
+        let n = SIGHT_CACHE_IDS / ENTRY_IDS + 100;
+        for i in 0..n {
+            let b = Aabb {
+                min: [i as f32; 3],
+                max: [i as f32 + 1.0; 3],
+            };
+            s.get_or::<()>(sight_key(0, &b), || Ok(Vec::new())).unwrap();
+        }
+        let (kept, ids) = {
+            let g = s.lock();
+            (g.0.len(), g.1)
+        };
+        assert!(kept <= SIGHT_CACHE_IDS / ENTRY_IDS, "{kept} kept");
+        assert!(ids <= SIGHT_CACHE_IDS);
     }
 }

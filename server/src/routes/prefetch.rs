@@ -46,9 +46,10 @@ pub async fn prefetch(
     let b = wants_bincode(&headers);
     let until = s.compute.deadline_from_now();
     let mut decoded = None;
-    // Held while this request computes its place's list: others of the place wait for it
-    // without a compute slot (`crate::inflight`).
-    let mut _lead = None;
+    // Held while this request computes its place's list (moved into the computation, so it
+    // is let go the moment that ends): others of the place wait for it without a compute
+    // slot (`crate::inflight`).
+    let mut lead = None;
     if body.len() <= INLINE_BYTES {
         let req: PrefetchRequest = decode_body(&headers, &body)?;
         let held = validate(&req, s.db().segments().len())?;
@@ -66,7 +67,7 @@ pub async fn prefetch(
                     answer.micros = t0.elapsed().as_micros().min(u32::MAX as u128) as u32;
                     return Ok(encoded(b, Bytes::from(encode(&s, &answer, b)?), None));
                 }
-                Some(Turn::Lead(lead)) => _lead = Some(lead),
+                Some(Turn::Lead(l)) => lead = Some(l),
             }
         }
         decoded = Some((req, held, key));
@@ -75,6 +76,7 @@ pub async fn prefetch(
     let bytes = s
         .compute
         .run_until(until, move |budget| {
+            let _lead = lead;
             let (req, held, key) = match decoded {
                 Some(d) => d,
                 None => {

@@ -236,7 +236,10 @@ impl End {
 }
 
 /// A need list being computed for the session.
-type Computing = Pin<Box<dyn Future<Output = Result<Arc<NeedList>, Error>> + Send>>;
+/// Its output: the list, and how long the computation held a compute slot (zero when it
+/// took another session's list).
+type Computing =
+    Pin<Box<dyn Future<Output = (Result<Arc<NeedList>, Error>, std::time::Duration)> + Send>>;
 
 /// An observer waiting for its need list.
 #[derive(Clone, Copy)]
@@ -341,14 +344,14 @@ impl Session {
         }
         let idle = self.state.config.idle_timeout;
         let mut idle_deadline = Instant::now() + idle;
-        let mut computing: Option<(Computing, Pending, Instant)> = None;
+        let mut computing: Option<(Computing, Pending)> = None;
         let end = loop {
             let now = Instant::now();
             if computing.is_none()
                 && now >= self.compute_after
                 && let Some(p) = self.pending.take()
             {
-                computing = Some((self.compute(p.obs, p.place), p, now));
+                computing = Some((self.compute(p.obs, p.place), p));
             }
             let waiting = computing.is_none() && self.pending.is_some();
             let reading = self.inbound_free <= now;
@@ -372,8 +375,8 @@ impl Session {
                 _ = sleep_until(self.inbound_free), if !reading => None,
                 _ = sleep_until(self.compute_after), if waiting => None,
                 done = async { computing.as_mut().expect("guarded").0.as_mut().await }, if computing.is_some() => {
-                    let (_, p, started) = computing.take().expect("guarded");
-                    self.on_computed(done, p, started)
+                    let (_, p) = computing.take().expect("guarded");
+                    self.on_computed(done, p)
                 }
                 _ = sleep_until(push_at.unwrap_or(idle_deadline)), if push_at.is_some() => {
                     self.next_push()

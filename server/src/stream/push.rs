@@ -15,6 +15,7 @@ use portico_data::prefetch::shared::{ShareKey, SharePlace};
 use portico_protocol::{LookaheadCull, NeedKind, Observer, StreamServer, segment_frame};
 use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
+use std::time::Duration;
 use tokio::time::Instant;
 
 /// Most pages one computation makes (nearest stab lists first). A page of flattened `mega`
@@ -24,7 +25,7 @@ pub const PAGES_PER_UPDATE: usize = 8;
 
 impl Session {
     /// Starts computing the need list for `obs`: the shared list of its place, or (without
-    /// cells) its own.
+    /// cells) its own; with the time it held a compute slot.
     pub(super) fn compute(&self, obs: Observer, place: Option<SharePlace>) -> Computing {
         let state = self.state.clone();
         let policy = self.policy;
@@ -34,61 +35,34 @@ impl Session {
             // One computation per place's list: a session whose place another is computing
             // waits for it without a compute slot (`crate::inflight`).
             let until = state.compute.deadline_from_now();
-            let mut _lead = None;
+            let mut lead = None;
             if let Some(k) = &key {
                 let cached = || state.prefetcher.shared_cached(k);
                 match state.lists.turn(k, until, cached).await {
-                    None => return Err(state.compute.busy()),
+                    None => return (Err(state.compute.busy()), Duration::ZERO),
                     Some(Turn::Ready(list)) if !paged || pages_made(&state, &list) => {
-                        return Ok(list);
+                        return (Ok(list), Duration::ZERO);
                     }
                     // Cached, but its pages are made on a slot below.
                     Some(Turn::Ready(_)) => {}
-                    Some(Turn::Lead(lead)) => _lead = Some(lead),
+                    Some(Turn::Lead(l)) => lead = Some(l),
                 }
             }
             let s = state.clone();
-            state
+            let done = state
                 .compute
                 .run_until(until, move |budget| {
-                    let p = &s.prefetcher;
-                    let list = match &key {
-                        Some(k) => p.shared_list(k, &obs, &policy, &budget),
-                        None => {
-                            s.metrics.stream_own_lists.fetch_add(1, Relaxed);
-                            let t0 = std::time::Instant::now();
-                            let own = p.need_list_within(&obs, &policy, &budget).map(Arc::new);
-                            s.exact.charge(t0.elapsed().as_secs_f64());
-                            own
-                        }
-                    }
-                    .map_err(Error::from)?;
-                    // The pages of the list's stab lists, made here on the compute slot so that
-                    // pushing them costs the async worker nothing ([`crate::pages`]).
-                    // Nearest first, at most PAGES_PER_UPDATE new ones and none past the
-                    // deadline: a list wider than the page cache must not make every page on
-                    // every update; the rest come with later lists, or the client reads them.
-                    if paged {
-                        let mut made = 0;
-                        for item in list.items.iter().filter(|i| i.kind == NeedKind::Stab) {
-                            if made >= PAGES_PER_UPDATE || budget.spent() {
-                                break;
-                            }
-                            let Some(&cell) = s.stab_cells.get(&item.segment) else {
-                                continue;
-                            };
-                            if s.page_frame(cell).is_some() {
-                                continue;
-                            }
-                            made += 1;
-                            if let Err(e) = s.page(cell).map(|p| p.frame().len()) {
-                                tracing::warn!("page of cell {cell}: {}", e.to_api().message);
-                            }
-                        }
-                    }
-                    Ok(list)
+                    // Let go when the computation ends (not when the session next looks).
+                    let _lead = lead;
+                    let on_slot = std::time::Instant::now();
+                    let list = compute_on_slot(&s, key.as_ref(), &obs, &policy, paged, &budget);
+                    Ok((list, on_slot.elapsed()))
                 })
-                .await
+                .await;
+            match done {
+                Ok(d) => d,
+                Err(e) => (Err(e), Duration::ZERO),
+            }
         })
     }
 
@@ -145,17 +119,16 @@ impl Session {
     /// now, or the policy changed); past its deadline the previous list stays.
     pub(super) fn on_computed(
         &mut self,
-        list: Result<Arc<NeedList>, Error>,
+        (list, took): (Result<Arc<NeedList>, Error>, Duration),
         p: Pending,
-        started: Instant,
     ) -> Option<Message> {
         self.state
             .metrics
             .update(p.arrived.elapsed().as_secs_f64(), p.updates);
-        // A computation that took half the deadline or more (a wide list, pages made to the
-        // budget, or stopped past it) makes the session wait as long before its next: one
-        // session takes at most about half a compute slot.
-        let took = started.elapsed();
+        // A computation that held its compute slot half the deadline or more (a wide list,
+        // pages made to the budget, or stopped past it) makes the session wait as long before
+        // its next: one session takes at most about half a compute slot. Waiting for another
+        // session's computation holds no slot and counts nothing.
         if took * 2 >= self.state.config.compute_deadline {
             self.compute_after = Instant::now() + took;
         }
@@ -309,4 +282,52 @@ fn pages_made(state: &AppState, list: &NeedList) -> bool {
         .filter_map(|i| state.stab_cells.get(&i.segment))
         .take(PAGES_PER_UPDATE)
         .all(|&c| state.page_frame(c).is_some())
+}
+
+/// The list a session's computation makes on its compute slot (its place's, or its own
+/// without a place) and, for a paged client, the pages of its stab lists.
+fn compute_on_slot(
+    s: &AppState,
+    key: Option<&ShareKey>,
+    obs: &Observer,
+    policy: &portico_protocol::Policy,
+    paged: bool,
+    budget: &portico_data::prefetch::Budget,
+) -> Result<Arc<NeedList>, Error> {
+    let p = &s.prefetcher;
+    let list = match key {
+        Some(k) => p.shared_list(k, obs, policy, budget),
+        None => {
+            s.metrics.stream_own_lists.fetch_add(1, Relaxed);
+            let t0 = std::time::Instant::now();
+            let own = p.need_list_within(obs, policy, budget).map(Arc::new);
+            s.exact.charge(t0.elapsed().as_secs_f64());
+            own
+        }
+    }
+    .map_err(Error::from)?;
+    // The pages of the list's stab lists, made here on the compute slot so that pushing them
+    // costs the async worker nothing ([`crate::pages`]). Nearest first, at most
+    // PAGES_PER_UPDATE new ones and none past the deadline: a list wider than the page cache
+    // must not make every page on every update; the rest come with later lists, or the
+    // client reads them.
+    if paged {
+        let mut made = 0;
+        for item in list.items.iter().filter(|i| i.kind == NeedKind::Stab) {
+            if made >= PAGES_PER_UPDATE || budget.spent() {
+                break;
+            }
+            let Some(&cell) = s.stab_cells.get(&item.segment) else {
+                continue;
+            };
+            if s.page_frame(cell).is_some() {
+                continue;
+            }
+            made += 1;
+            if let Err(e) = s.page(cell).map(|p| p.frame().len()) {
+                tracing::warn!("page of cell {cell}: {}", e.to_api().message);
+            }
+        }
+    }
+    Ok(list)
 }
