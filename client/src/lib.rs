@@ -16,7 +16,9 @@
 //!   keeps in flight on the measured link; [`deadline`]: which of the server's items to read
 //!   now and which a later answer can still bring in time.
 //! - [`engine`]: the IO stage without IO — state machines every front end drives (pull, …).
-//! - [`navigate`]: Funkhouser's mouse-and-keyboard navigation (§3.3.1).
+//! - [`navigate`]: Funkhouser's mouse-and-keyboard navigation (§3.3.1); [`walk`]: walk mode
+//!   (walls, floors, stairs and holes from the cells and portals); [`pick`]: the object under
+//!   a pixel.
 //! - [`defaults`]: the view, pace and IO defaults every front end shares.
 //! - [`policy`], [`stats`]: prefetch policy specs, per-frame statistics.
 
@@ -34,7 +36,9 @@ pub mod frame;
 pub mod navigate;
 pub mod pacing;
 pub mod parts;
+pub mod pick;
 pub mod policy;
 pub mod schedule;
 pub mod stats;
 pub mod view;
+pub mod walk;
