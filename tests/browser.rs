@@ -428,6 +428,8 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
         })
         .await;
         assert_eq!(s["elision"], "impostors", "{s}");
+        // Boxes stand in for the clusters whose detail had not come (or is far).
+        assert!(s["frames_with_boxes"].as_u64() > Some(0), "no impostor boxes drawn: {s}");
         assert_eq!(s["manifest"], "whole", "{s}");
         assert_eq!(s["unusable_segments"], 0, "{s}");
         let errors = eval(&c, "return window.porticoErrors || []").await;
@@ -477,8 +479,158 @@ fn the_viewer_walks_the_building_in_headless_chromium() {
         assert_eq!(s["unusable_segments"], 0, "{s}");
         let errors = eval(&c, "return window.porticoErrors || []").await;
         assert_eq!(errors, json!([]), "the page logged errors");
-        c.close().await.unwrap();
         drop(stop);
         server.join().unwrap();
+
+        // Walking like a person, on two storeys joined by a flight of stairs.
+        walk_and_pick(&c, &tmp).await;
+        c.close().await.unwrap();
     });
+}
+
+/// Holds `code` down in the page for `ms` milliseconds; the eye then.
+async fn hold(c: &Client, code: &str, ms: u64) -> Value {
+    eval(
+        c,
+        &format!("window.dispatchEvent(new KeyboardEvent('keydown', {{code: '{code}'}}))"),
+    )
+    .await;
+    tokio::time::sleep(Duration::from_millis(ms)).await;
+    eval(
+        c,
+        &format!("window.dispatchEvent(new KeyboardEvent('keyup', {{code: '{code}'}}))"),
+    )
+    .await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    stats(c).await["eye"].clone()
+}
+
+/// In walk mode (the page's default) the page's observer stops at a wall where the walker
+/// of the client core does, and walking off the upper floor into a stair's hole lowers it; a
+/// click on an object names it with its tags.
+async fn walk_and_pick(c: &Client, dir: &Path) {
+    use glam::Vec3;
+    use portico_client::walk::Walker;
+    let db = common::build_tiny_floors(dir, 2);
+    let d = portico_data::Database::open(&db).unwrap();
+    let graph = d.cell_graph().unwrap().expect("cells");
+    let header = d.header();
+    // A place on the upper floor beside the flight's hole, facing it, with a wall behind.
+    let flight = header
+        .instances
+        .iter()
+        .find(|i| i.tag("kind") == Some("stairs") || i.name.contains("stairs"))
+        .expect("a flight of stairs")
+        .bounds;
+    let x = (flight.min[0] + flight.max[0]) / 2.0;
+    let z = (flight.min[2] + flight.max[2]) / 2.0 + 0.5;
+    let native = |from: Vec3, toward: Vec3, seconds: f32| {
+        let mut w = Walker::new();
+        let mut eye = from;
+        for _ in 0..(seconds * 30.0) as usize {
+            w.gather_header(&graph, header, 0, eye);
+            eye = w.step(&graph, eye, toward.normalize() * 1.5 / 30.0, 1.0 / 30.0);
+        }
+        eye
+    };
+    let (start, toward) = [flight.min[0] - 0.6, flight.max[0] + 0.6]
+        .into_iter()
+        .map(|side| {
+            // Dropped onto the upper floor there.
+            let toward = Vec3::new(x - side, 0.0, 0.0).normalize();
+            (
+                native(Vec3::new(side, flight.max[1] + 0.5, z), toward, 1.0 / 30.0),
+                toward,
+            )
+        })
+        .find(|&(s, t)| native(s, t, 2.0).y < s.y - 1.0)
+        .expect("a side of the hole with a floor");
+    let wall = native(start, -toward, 3.0);
+    assert!(
+        (wall - start).length() < 4.0,
+        "no wall behind {start}: {wall}"
+    );
+
+    let state = AppState::open(
+        &db,
+        Config {
+            viewer: Some(viewer_dir()),
+            ..Config::default()
+        },
+    )
+    .unwrap();
+    let (addr, stop, server) = serve(state, "127.0.0.1:0".parse().unwrap());
+    let back = -toward;
+    c.goto(&format!(
+        "http://{addr}/?backend=webgl#eye={},{},{}&dir={},0,{}",
+        start.x, start.y, start.z, back.x, back.z
+    ))
+    .await
+    .unwrap();
+    let s = wait_for(c, 90, "the two-storey building drawn", |s| {
+        s["first_complete_frame"].is_u64() && s["gait"] == "walk"
+    })
+    .await;
+    let eye = |v: &Value| -> Vec3 {
+        let a = v.as_array().unwrap();
+        Vec3::new(
+            a[0].as_f64().unwrap() as f32,
+            a[1].as_f64().unwrap() as f32,
+            a[2].as_f64().unwrap() as f32,
+        )
+    };
+    assert!(
+        (eye(&s["eye"]) - start).length() < 0.05,
+        "the walker moved the start: {s}"
+    );
+    // Into the wall behind for 3 s: stopped where the client core's walker stops (1.5 m/s
+    // would have gone 4.5 m).
+    let stopped = eye(&hold(c, "KeyW", 3000).await);
+    assert!(
+        (stopped - wall).length() < 0.05,
+        "the page stopped at {stopped}, the walker at {wall}"
+    );
+    // Turned round, on over the hole: lowered onto the flight or the floor below.
+    eval(
+        c,
+        &format!(
+            "window.portico.look({},{},{},{},0,{})",
+            stopped.x, stopped.y, stopped.z, toward.x, toward.z
+        ),
+    )
+    .await;
+    let lowered = eye(&hold(c, "KeyW", 4000).await);
+    assert!(
+        lowered.y < start.y - 1.0,
+        "not lowered over the hole: {lowered} from {start}"
+    );
+
+    // A click on what is in front: its name and tags.
+    let picked: Value = serde_json::from_str(
+        eval(c, "return window.portico.pick(0, -0.2)")
+            .await
+            .as_str()
+            .unwrap(),
+    )
+    .unwrap();
+    assert!(
+        picked["instance"].is_u64() && picked["triangles"].as_u64() > Some(0),
+        "{picked}"
+    );
+    assert!(
+        !picked["tags"].as_array().unwrap().is_empty() && picked["class"].is_string(),
+        "{picked}"
+    );
+    // The panel shows it by its next refresh (four a second).
+    tokio::time::sleep(Duration::from_millis(600)).await;
+    let shown = eval(c, "return document.getElementById('pick').textContent").await;
+    let shown = shown.as_str().unwrap_or_default();
+    assert!(
+        shown.contains(picked["name"].as_str().unwrap()),
+        "the panel shows {shown:?} for {picked}"
+    );
+    let errors = eval(c, "return window.porticoErrors || []").await;
+    assert_eq!(errors, json!([]), "the page logged errors");
+    drop(stop);
+    server.join().unwrap();
 }

@@ -29,6 +29,28 @@ pub fn build_tiny_with(dir: &Path, opts: &BuildOptions) -> PathBuf {
     db
 }
 
+/// The tiny building on `floors` storeys (`dir/tiny-N.portico`), the generator's seed 3: from
+/// two storeys up, stairwells with a flight of stairs to the next.
+pub fn build_tiny_floors(dir: &Path, floors: u32) -> PathBuf {
+    let params = portico_generator::Params {
+        preset: portico_generator::Preset::Tiny,
+        seed: 3,
+        floors: Some(floors),
+    };
+    let b = portico_generator::generate(&params, &mut |_| {}).expect("generate");
+    let glb = dir.join(format!("tiny-{floors}.glb"));
+    std::fs::write(&glb, &b.glb).unwrap();
+    let db = dir.join(format!("tiny-{floors}.portico"));
+    build(
+        import_file(&glb).unwrap(),
+        &db,
+        &BuildOptions::default(),
+        &Quiet,
+    )
+    .unwrap();
+    db
+}
+
 /// The tiny building with the generator's textured materials (`dir/textured.portico`), its
 /// texture segments cut into parts of 4 KiB (so that every client joins parts, whatever level
 /// it asks for).

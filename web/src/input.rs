@@ -6,7 +6,10 @@
 //!   down;
 //! - W/S or ↑/↓ walk forward and back, A/D step sideways, Q/E or ←/→ turn, R/F rise and sink
 //!   — for as long as the key is held;
-//! - T starts or stops the model's standard tour.
+//! - T starts or stops the model's standard tour; G switches between walking (the default:
+//!   walls stop the observer, floors carry it, stairs lift it: [`portico_client::walk`]) and
+//!   flying;
+//! - a short click or tap (under 300 ms, barely moving) picks the object under it.
 
 use glam::Vec3;
 use portico_client::navigate::{Controls, Navigator};
@@ -23,13 +26,28 @@ pub struct Input {
     pub toggle_tour: bool,
     /// Something moved the view since the last frame (stops the tour).
     pub touched: bool,
+    /// G was pressed since the last frame.
+    pub toggle_gait: bool,
+    /// Where (-1..1, y up) a short click or tap asked for a pick since the last frame.
+    pub click: Option<[f32; 2]>,
+    /// When (ms, the event's clock) and where the pointer went down.
+    pressed: Option<(f64, [f32; 2])>,
 }
+
+/// A press shorter than this (ms)...
+const CLICK_MS: f64 = 300.0;
+/// ...that moves less than this (of the canvas's half width) is a click.
+const CLICK_MOVE: f32 = 0.03;
 
 impl Input {
     /// A key went down; `true` when the page should not also scroll with it.
     pub fn key_down(&mut self, code: &str) -> bool {
         if code == "KeyT" {
             self.toggle_tour = true;
+            return true;
+        }
+        if code == "KeyG" {
+            self.toggle_gait = true;
             return true;
         }
         let ours = matches!(
@@ -59,8 +77,10 @@ impl Input {
         self.keys.remove(code);
     }
 
-    /// A pointer button went down at `cursor` (-1..1, y up): 0 forward, 1 spin, 2 backward.
-    pub fn pointer_down(&mut self, button: i16, cursor: [f32; 2], ctrl: bool) {
+    /// A pointer button went down at `cursor` (-1..1, y up) at `at_ms`: 0 forward, 1 spin,
+    /// 2 backward.
+    pub fn pointer_down(&mut self, button: i16, cursor: [f32; 2], ctrl: bool, at_ms: f64) {
+        self.pressed = (button == 0).then_some((at_ms, cursor));
         match button {
             0 => self.controls.forward = true,
             1 => self.controls.spin = true,
@@ -78,8 +98,18 @@ impl Input {
         self.controls.pitch = ctrl;
     }
 
-    /// Every button released (or the pointer left the page).
-    pub fn pointer_up(&mut self) {
+    /// Every button released (or the pointer left the page) at `at_ms`: a short press that
+    /// barely moved is a click.
+    pub fn pointer_up(&mut self, at_ms: f64) {
+        if let Some((t, at)) = self.pressed.take() {
+            let [dx, dy] = [
+                self.controls.cursor[0] - at[0],
+                self.controls.cursor[1] - at[1],
+            ];
+            if at_ms - t < CLICK_MS && dx.hypot(dy) < CLICK_MOVE {
+                self.click = Some(at);
+            }
+        }
         self.controls.forward = false;
         self.controls.backward = false;
         self.controls.spin = false;
@@ -131,5 +161,24 @@ mod tests {
             !input.key_down("KeyZ"),
             "keys that are not ours scroll the page"
         );
+    }
+
+    #[test]
+    fn a_short_still_press_is_a_click_and_a_held_or_dragged_one_is_not() {
+        let mut input = Input::default();
+        input.pointer_down(0, [0.2, 0.1], false, 1000.0);
+        input.pointer_up(1150.0);
+        assert_eq!(input.click.take(), Some([0.2, 0.1]));
+        input.pointer_down(0, [0.2, 0.1], false, 1000.0);
+        input.pointer_up(1400.0);
+        assert_eq!(input.click, None, "held: a walk, not a click");
+        input.pointer_down(0, [0.2, 0.1], false, 1000.0);
+        input.pointer_move([0.3, 0.1], false);
+        input.pointer_up(1100.0);
+        assert_eq!(input.click, None, "dragged");
+        input.pointer_down(2, [0.2, 0.1], false, 1000.0);
+        input.pointer_up(1100.0);
+        assert_eq!(input.click, None, "the right button walks back");
+        assert!(input.key_down("KeyG") && input.toggle_gait);
     }
 }

@@ -89,7 +89,7 @@ impl MiniMap {
             ctx.stroke_rect(x, z, cw, cd);
         }
         ctx.set_fill_style_str("rgba(120, 220, 255, 0.9)");
-        for &o in &v.drawn {
+        for &(o, _, _) in &v.drawn {
             if let Some(b) = v.model.bounds.get(o as usize) {
                 let c = b.center();
                 let (x, z) = fit.at(c.x, c.z);

@@ -11,6 +11,7 @@ use portico_client::cache::split_budget;
 use portico_client::engine::catalogue::Start;
 use portico_client::engine::holdings::Holdings;
 use portico_client::frame::Decider;
+use portico_client::walk::Gait;
 use portico_data::cells::CellGraph;
 use portico_data::cells::paged::GraphCore;
 use portico_data::format::Header;
@@ -46,6 +47,25 @@ impl Handle {
         let mut v = self.viewer.borrow_mut();
         v.touring = None;
         v.nav = navigator(Vec3::new(x, y, z), Vec3::new(dx, dy, dz));
+        v.walker.reset();
+    }
+
+    /// Picks the object at (x, y) of the canvas (each -1..1, y up) in the last frame drawn, as
+    /// a click there does: its name, class, storey, GUID, tags and what is drawn of it as
+    /// JSON ([`portico_client::pick::Picked`]), or `null` where nothing drawn is.
+    pub fn pick(&self, x: f32, y: f32) -> String {
+        let picked = self.viewer.borrow_mut().pick([x, y]);
+        serde_json::to_string(&picked).unwrap_or_default()
+    }
+
+    /// Walks (`"walk"`: walls stop the observer, floors carry it) or flies (`"fly"`).
+    pub fn gait(&self, name: &str) {
+        let mut v = self.viewer.borrow_mut();
+        v.gait = match name {
+            "fly" => Gait::Fly,
+            _ => Gait::Walk,
+        };
+        v.walker.reset();
     }
 
     /// Starts (or with `false` stops) the model's standard tour.
@@ -242,6 +262,10 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
             push,
         ),
         nav: navigator(eye, dir),
+        gait: Gait::Walk,
+        walker: Default::default(),
+        pages_learned: 0,
+        view_proj: glam::Mat4::IDENTITY,
         touring: None,
         drawn: Vec::new(),
         stats: Stats {
@@ -271,12 +295,14 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
     listen(&window, &canvas, &handle.input)?;
     follow_address(&window, &handle.viewer)?;
     let overlay = document.get_element_by_id(&overlay_id);
+    let panel = document.get_element_by_id("pick");
     let map = crate::minimap::MiniMap::find(&document, "map");
     run_frames(
         handle.viewer.clone(),
         handle.input.clone(),
         canvas,
         overlay,
+        panel,
         map,
     );
     Ok(Handle {
@@ -386,7 +412,7 @@ fn listen(
     let blur = Closure::<dyn FnMut(web_sys::Event)>::new(move |_e: web_sys::Event| {
         let mut i = i.borrow_mut();
         i.keys.clear();
-        i.pointer_up();
+        i.pointer_up(f64::INFINITY);
     });
     window.add_event_listener_with_callback("blur", blur.as_ref().unchecked_ref())?;
     blur.forget();
@@ -395,7 +421,7 @@ fn listen(
     let pdown = Closure::<dyn FnMut(PointerEvent)>::new(move |e: PointerEvent| {
         let _ = c.set_pointer_capture(e.pointer_id());
         i.borrow_mut()
-            .pointer_down(e.button(), cursor(&c, &e), e.ctrl_key());
+            .pointer_down(e.button(), cursor(&c, &e), e.ctrl_key(), e.time_stamp());
         e.prevent_default();
     });
     canvas.add_event_listener_with_callback("pointerdown", pdown.as_ref().unchecked_ref())?;
@@ -407,8 +433,8 @@ fn listen(
     canvas.add_event_listener_with_callback("pointermove", pmove.as_ref().unchecked_ref())?;
     pmove.forget();
     let i = input.clone();
-    let pup = Closure::<dyn FnMut(web_sys::Event)>::new(move |_e: web_sys::Event| {
-        i.borrow_mut().pointer_up();
+    let pup = Closure::<dyn FnMut(web_sys::Event)>::new(move |e: web_sys::Event| {
+        i.borrow_mut().pointer_up(e.time_stamp());
     });
     for ev in ["pointerup", "pointercancel", "lostpointercapture"] {
         canvas.add_event_listener_with_callback(ev, pup.as_ref().unchecked_ref())?;
@@ -429,6 +455,7 @@ fn follow_address(window: &web_sys::Window, viewer: &Rc<RefCell<Viewer>>) -> Res
             let mut v = v.borrow_mut();
             v.touring = None;
             v.nav = navigator(eye, dir);
+            v.walker.reset();
         }
     });
     window.add_event_listener_with_callback("hashchange", moved.as_ref().unchecked_ref())?;
@@ -443,6 +470,7 @@ fn run_frames(
     input: Rc<RefCell<Input>>,
     canvas: HtmlCanvasElement,
     overlay: Option<web_sys::Element>,
+    panel: Option<web_sys::Element>,
     map: Option<crate::minimap::MiniMap>,
 ) {
     type Tick = Closure<dyn FnMut(f64)>;
@@ -460,6 +488,11 @@ fn run_frames(
                 last_overlay = now;
                 if let Some(o) = &overlay {
                     o.set_text_content(Some(&overlay_text(&v.stats)));
+                }
+                // The pick panel: what the last click or tap named.
+                if let (Some(p), Some(picked)) = (&panel, &v.stats.picked) {
+                    p.set_text_content(Some(&picked.lines()));
+                    let _ = p.set_attribute("style", "display: block");
                 }
                 if let Some(m) = &map {
                     m.draw(&v);
@@ -501,6 +534,11 @@ fn overlay_text(s: &Stats) -> String {
     }
     if s.touring {
         t += "\ntour (T stops)";
+    } else {
+        t += match s.gait {
+            "walk" => "\nwalking (G: fly)",
+            _ => "\nflying (G: walk)",
+        };
     }
     if let Some(e) = &s.last_error {
         t += &format!("\n{} errors; last: {e}", s.failures);

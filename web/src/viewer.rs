@@ -13,7 +13,9 @@ use portico_client::engine::holdings::Holdings;
 use portico_client::frame::{Cached, Decider, Scene};
 use portico_client::navigate::Navigator;
 use portico_client::parts::{Joined, Parts};
+use portico_client::pick::{self, Picked};
 use portico_client::view::{self, Viewpoint};
+use portico_client::walk::{Gait, Walker};
 use portico_data::cells::{CellGraph, StabList};
 use portico_data::format::Header;
 use portico_data::geometry::Aabb;
@@ -110,6 +112,10 @@ pub struct Stats {
     pub backend: String,
     /// Whether the standard tour drives the view.
     pub touring: bool,
+    /// `walk` or `fly` (while the tour does not drive the view).
+    pub gait: &'static str,
+    /// The last object picked (a click, a tap or `pick()`).
+    pub picked: Option<Picked>,
     /// How segments come now: `stream` (pushed) or `pull` (HTTP).
     pub transport: &'static str,
     /// Stream sessions opened so far.
@@ -126,6 +132,8 @@ pub struct Stats {
     pub boxes_drawn: u32,
     /// See [`Stats::boxes_drawn`].
     pub textured_boxes_drawn: u32,
+    /// Frames that drew cluster boxes (where detail was missing or far).
+    pub frames_with_boxes: u64,
     /// Bytes of what it read before its first frame (decoded: the core, or the whole manifest
     /// and cell graph).
     pub startup_bytes: u64,
@@ -158,8 +166,16 @@ pub struct Viewer {
     /// The tour and the time (s) it started, while it drives the view.
     pub touring: Option<f64>,
     pub stats: Stats,
-    /// The instances drawn in the last frame (for the mini-map).
-    pub drawn: Vec<u32>,
+    /// Walking or flying, and the walking body's state.
+    pub gait: Gait,
+    pub walker: Walker,
+    /// Cell pages taken so far (the walker looks at the objects again when one comes).
+    pub pages_learned: usize,
+    /// The last frame's world-to-clip matrix (for picks).
+    pub view_proj: glam::Mat4,
+    /// The instances drawn in the last frame (for the mini-map and picks), with the LOD and
+    /// segment each was drawn with.
+    pub drawn: Vec<(u32, usize, u32)>,
     /// Recent frame intervals (ms), for the mean.
     pub recent: std::collections::VecDeque<f64>,
     pub last_t: Option<f64>,
@@ -176,6 +192,7 @@ impl Viewer {
                     if let Some(p) = page {
                         let m = &mut self.model;
                         Start::learn(&mut m.header, m.graph.as_mut(), &mut m.bounds, &p);
+                        self.pages_learned += 1;
                     }
                     self.stats.segments_received += 1;
                     self.stats.bytes_received += bytes.len() as u64;
@@ -296,6 +313,16 @@ impl Viewer {
         if std::mem::take(&mut input.touched) {
             self.touring = None;
         }
+        if std::mem::take(&mut input.toggle_gait) {
+            self.gait = match self.gait {
+                Gait::Walk => Gait::Fly,
+                Gait::Fly => Gait::Walk,
+            };
+            self.walker.reset();
+        }
+        if let Some(at) = input.click.take() {
+            self.pick(at);
+        }
         let (eye, dir, motion) = match (self.touring, &self.model.tour) {
             (Some(start), Some(tour)) => {
                 let s = ((t - start) as f32) % tour.duration().max(1e-3);
@@ -310,7 +337,7 @@ impl Viewer {
             }
             _ => {
                 let before = self.nav.dir();
-                let velocity = input.apply(&mut self.nav, dt as f32);
+                let velocity = self.walk(input, dt as f32);
                 let (eye, dir) = (self.nav.eye, self.nav.dir());
                 let turn = view::Motion::between(eye, before, eye, dir, dt as f32).turn;
                 (eye, dir, view::Motion { velocity, turn })
@@ -381,7 +408,7 @@ impl Viewer {
         self.drawn.clear();
         for o in &d.drawn {
             if let Some(Resident::Mesh(mesh)) = self.held.cache.get(o.segment) {
-                self.drawn.push(o.instance);
+                self.drawn.push((o.instance, o.lod, o.segment));
                 let cache = &self.held.cache;
                 draws.push(Draw::of(header, o, mesh, |s| match cache.get(s) {
                     Some(Resident::Texture(t)) => Some(t),
@@ -404,6 +431,7 @@ impl Viewer {
             ..Default::default()
         });
         let view_proj = view.camera.view_proj(size.0 as f32 / size.1.max(1) as f32);
+        self.view_proj = view_proj;
         // The clusters the traversal drew as boxes: textured where the atlas tile is
         // resident, else in their colours.
         let textured = match &header.hierarchy {
@@ -419,6 +447,7 @@ impl Viewer {
             None => Vec::new(),
         };
         self.stats.boxes_drawn = d.boxes.len() as u32;
+        self.stats.frames_with_boxes += u64::from(!d.boxes.is_empty());
         self.stats.textured_boxes_drawn = textured.len() as u32;
         let drawn = self
             .renderer
@@ -430,6 +459,50 @@ impl Viewer {
         }
         self.renderer.queue().present(frame);
         self.stats.frames += 1;
+    }
+}
+
+impl Viewer {
+    /// Moves the navigator by what is held for `dt` seconds, walking or flying; returns the
+    /// velocity (m/s). Walking, the navigator's move is the walker's wish: walls stop it,
+    /// floors carry it, stairs lift it, holes drop it.
+    fn walk(&mut self, input: &Input, dt: f32) -> Vec3 {
+        let before = self.nav.eye;
+        let flown = input.apply(&mut self.nav, dt);
+        let graph = self.model.graph.as_ref().filter(|g| !g.grid_fallback);
+        let (Gait::Walk, Some(graph)) = (self.gait, graph) else {
+            self.stats.gait = "fly";
+            return flown;
+        };
+        self.stats.gait = "walk";
+        let header = &self.model.header;
+        self.walker
+            .gather_header(graph, header, self.pages_learned, before);
+        self.nav.eye = self.walker.step(graph, before, self.nav.eye - before, dt);
+        if dt > 0.0 {
+            (self.nav.eye - before) / dt
+        } else {
+            Vec3::ZERO
+        }
+    }
+
+    /// Picks the object drawn at `ndc` (-1..1, y up) of the last frame; keeps it in the stats.
+    pub fn pick(&mut self, ndc: [f32; 2]) -> Option<Picked> {
+        let (origin, dir) = pick::ray(&self.view_proj, ndc)?;
+        let header = &self.model.header;
+        let boxes = self
+            .drawn
+            .iter()
+            .filter_map(|&(i, _, _)| Some((i, &header.instances.get(i as usize)?.bounds)));
+        let (instance, distance) = pick::pick(boxes, origin, dir)?;
+        let &(_, lod, segment) = self.drawn.iter().find(|d| d.0 == instance)?;
+        let bytes = match self.held.cache.get(segment) {
+            Some(Resident::Mesh(m)) => m.gpu_bytes(),
+            _ => 0,
+        };
+        let picked = Picked::of(header, instance, lod, bytes, distance)?;
+        self.stats.picked = Some(picked.clone());
+        Some(picked)
     }
 }
 
