@@ -1,6 +1,8 @@
 //! `portico walk --window` (cargo feature `window`): the same client in a window, driven by the
 //! mouse and keyboard as Funkhouser §3.3.1 describes ([`portico_client::navigate`]), optionally recording
 //! the walk as a path (`--record`) that `portico walk --path` and `portico bench` replay.
+//! The observer walks as a person by default ([`portico_client::walk`]: walls, floors, stairs,
+//! holes); G switches to flying and back.
 //!
 //! Frames are drawn by the same [`portico_render::Renderer`] as headless walks, straight into
 //! the window's wgpu surface ([`Session::frame_into`]: no read-back). Where no surface works
@@ -11,7 +13,9 @@
 
 use crate::walk::{Session, WalkConfig, WalkSummary};
 use anyhow::{Context as _, Result};
+use glam::Vec3;
 use portico_client::navigate::{Controls, Navigator, Recorder, Step};
+use portico_client::walk::Gait;
 use portico_render::wgpu;
 use portico_render::{COLOR_FORMAT, Renderer};
 use std::num::NonZeroU32;
@@ -45,7 +49,9 @@ pub fn run(cfg: &WalkConfig, opts: &WindowOptions) -> Result<WalkSummary> {
     let mut app = App {
         cfg,
         session: None,
+        eye: nav.eye,
         nav,
+        gait: Gait::Walk,
         controls: Controls::default(),
         recorder: Recorder::default(),
         view: None,
@@ -96,6 +102,10 @@ struct App<'a> {
     cfg: &'a WalkConfig,
     session: Option<Session<'a>>,
     nav: Navigator,
+    /// Walking (the default: [`portico_client::walk`]) or flying (G switches), and the eye
+    /// after the last frame (where a walk goes on from).
+    gait: Gait,
+    eye: Vec3,
     controls: Controls,
     recorder: Recorder,
     view: Option<View>,
@@ -192,7 +202,18 @@ impl App<'_> {
         let dt = now.duration_since(self.last).as_secs_f32().min(0.25);
         self.last = now;
         let before = self.nav.dir();
-        let velocity = self.nav.update(&self.controls, dt);
+        let mut velocity = self.nav.update(&self.controls, dt);
+        if self.gait == Gait::Walk
+            && let Some(session) = self.session.as_mut()
+        {
+            self.nav.eye = session.walk(self.eye, self.nav.eye, dt);
+            velocity = if dt > 0.0 {
+                (self.nav.eye - self.eye) / dt
+            } else {
+                Vec3::ZERO
+            };
+        }
+        self.eye = self.nav.eye;
         let motion = portico_client::view::Motion {
             velocity,
             turn: portico_client::view::Motion::between(
@@ -293,6 +314,11 @@ impl ApplicationHandler for App<'_> {
                 };
                 if code == KeyCode::Escape {
                     el.exit();
+                } else if code == KeyCode::KeyG {
+                    self.gait = match self.gait {
+                        Gait::Walk => Gait::Fly,
+                        Gait::Fly => Gait::Walk,
+                    };
                 } else if let Some(step) = key_step(code) {
                     self.nav.step(step);
                 }

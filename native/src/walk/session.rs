@@ -87,6 +87,12 @@ impl<'a> Session<'a> {
         self.observer(eye, dir, motion)
     }
 
+    /// The eye walked from `from` towards `to` over `dt` seconds, as a person walks
+    /// ([`portico_client::walk`]).
+    pub fn walk(&mut self, from: Vec3, to: Vec3, dt: f32) -> Vec3 {
+        self.walker.walk(from, to, dt)
+    }
+
     /// An observer at `eye` looking along `dir`, moving with `motion`, with this client's field
     /// of view and announced speeds.
     pub fn observer(&self, eye: Vec3, dir: Vec3, motion: view::Motion) -> Observer {

@@ -21,6 +21,10 @@ use portico_render::{Draw, Renderer, StandIns};
 pub(super) struct Walker<'a> {
     pub(super) cfg: &'a WalkConfig,
     model: Model,
+    /// A person's body for walk mode, and the cell pages taken so far (it looks at the
+    /// objects again when one comes).
+    body: portico_client::walk::Walker,
+    pages: usize,
     /// The cache, what is held beside it, and what the last frame lacked.
     held: Holdings<Resident>,
     decider: Decider,
@@ -45,10 +49,24 @@ pub(super) struct Walker<'a> {
 }
 
 impl<'a> Walker<'a> {
+    /// The eye walked from `from` towards `to` over `dt` seconds ([`portico_client::walk`]):
+    /// walls and furniture stop it, floors carry it, stairs lift it, holes drop it. Without
+    /// cells (a model with none, a grid) it goes to `to`.
+    pub(super) fn walk(&mut self, from: Vec3, to: Vec3, dt: f32) -> Vec3 {
+        let Some(graph) = self.model.graph.as_ref().filter(|g| !g.grid_fallback) else {
+            return to;
+        };
+        self.body
+            .gather_header(graph, &self.model.header, self.pages, from);
+        self.body.step(graph, from, to - from, dt)
+    }
+
     pub(super) fn new(cfg: &'a WalkConfig, model: Model, cost: CostModel) -> Walker<'a> {
         Walker {
             cfg,
             model,
+            body: Default::default(),
+            pages: 0,
             held: Holdings::new(portico_client::cache::split_budget(cfg.cache_bytes).0),
             decider: Decider::new(
                 cfg.elision,
@@ -105,6 +123,7 @@ impl<'a> Walker<'a> {
                             if let Some(p) = page {
                                 let m = &mut self.model;
                                 Start::learn(&mut m.header, m.graph.as_mut(), &mut m.bounds, &p);
+                                self.pages += 1;
                             }
                             (Resident::Stab(s), bytes)
                         }
