@@ -100,6 +100,7 @@ def main():
 
         run(f"document.getElementById('view').style.width='{w}px';"
             f"document.getElementById('view').style.height='{h}px';")
+        run("performance.setResourceTimingBufferSize(100000)")
         t0 = time.time()
         stats = None
         while time.time() - t0 < 300:
@@ -129,6 +130,12 @@ def main():
             samples.append(json.loads(run("return window.portico.stats()")))
         elapsed = time.time() - t1
         last = samples[-1] if samples else first
+        # Every byte of the run: HTTP as Chromium counts it on the wire, and the segments
+        # the stream pushed over its WebSocket (which resource timing does not see).
+        http_total = run("return performance.getEntriesByType('navigation')"
+                         ".concat(performance.getEntriesByType('resource'))"
+                         ".reduce((s, e) => s + (e.transferSize || 0), 0)")
+        pushed = last.get("bytes_received", 0) if last.get("transport") == "stream" else 0
         out = {
             "server": a.server,
             "link": a.link or "loopback",
@@ -147,6 +154,12 @@ def main():
             "resident_mb": last.get("resident_bytes", 0) / 2**20,
             "cache_budget_mb": last.get("cache_budget", 0) / 2**20,
             "received_mb": last.get("bytes_received", 0) / 1e6,
+            "total_mb": (http_total + pushed) / 1e6,
+            # Over pull (`--query transport=pull`): the prefetch requests and answers the tour
+            # cost, beside the segment bytes it received.
+            "tour_answers": last.get("answers", 0) - first.get("answers", 0),
+            "tour_prefetch_mb": (last.get("prefetch_bytes", 0) - first.get("prefetch_bytes", 0)) / 1e6,
+            "tour_segment_mb": (last.get("bytes_received", 0) - first.get("bytes_received", 0)) / 1e6,
             "failures": last.get("failures"),
             "errors": run("return window.porticoErrors || []"),
         }

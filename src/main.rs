@@ -25,6 +25,9 @@ enum Command {
     Build(cmd::build::Args),
     /// Print statistics of a display database.
     Inspect(cmd::inspect::Args),
+    /// Write a display database as OGC 3D Tiles (tileset.json and binary glTF tiles).
+    #[command(name = "export-3dtiles")]
+    Export3dTiles(cmd::export3dtiles::Args),
     /// Check the stored visibility against the occluders by casting random rays.
     Verify(cmd::verify::Args),
     /// Compare visibility culling methods over random views (Funkhouser Table 4.1).
@@ -56,6 +59,7 @@ fn main() -> ExitCode {
         Command::Generate(a) => cmd::generate::run(a),
         Command::Build(a) => cmd::build::run(a),
         Command::Inspect(a) => cmd::inspect::run(a),
+        Command::Export3dTiles(a) => cmd::export3dtiles::run(a),
         Command::Verify(a) => cmd::verify::run(a),
         Command::Cull(a) => cmd::cull::run(a),
         Command::Serve(a) => cmd::serve::run(a),

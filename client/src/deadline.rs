@@ -13,7 +13,8 @@
 //! ([`portico_data::deadline`], which the server's push sessions apply too),
 //!
 //! where `asked` is when the answer's observer was sent, `period` how long until the next answer
-//! can change the list (a round trip, at least a frame), `queued` the wire bytes in flight and
+//! can change the list (a round trip, at least a frame, plus the wait before the pull engine
+//! asks again: [`Link::wait_s`]), `queued` the wire bytes in flight and
 //! of the items kept before it, and `margin` [`MARGIN_FRAMES`]. Items the view needs now
 //! (`frames` 0) are always kept. Before the link is measured, only items within
 //! [`UNMEASURED_FRAMES`] are. Ahead of every item goes what the last frame lacked
@@ -35,6 +36,10 @@ pub struct Link {
     pub rtt_s: Option<f64>,
     /// Wire bytes in flight now.
     pub in_flight: u64,
+    /// How long (seconds) past a round trip the next answer may be in coming: the pull
+    /// engine's wait before it asks again ([`crate::engine::pull::Reask::wait_s`]; 0 when it
+    /// asks after every answer).
+    pub wait_s: f64,
 }
 
 /// The read list's inputs: the latest answer and what the latest frame lacked.
@@ -76,7 +81,7 @@ impl ReadPlan {
         let age = now.saturating_duration_since(asked).as_secs_f64();
         let due = match (link.rate, link.rtt_s) {
             (Some(rate), Some(rtt)) if rate > 0.0 => {
-                let lead = age + rtt.max(dt) + rtt + MARGIN_FRAMES * dt;
+                let lead = age + rtt.max(dt) + link.wait_s + rtt + MARGIN_FRAMES * dt;
                 let mut queued = link.in_flight as f64;
                 let mut out = Vec::new();
                 for i in &self.answer {
@@ -126,6 +131,7 @@ mod tests {
         rate: Some(1e6),
         rtt_s: Some(0.05),
         in_flight: 0,
+        wait_s: 0.0,
     };
 
     #[test]
@@ -167,6 +173,19 @@ mod tests {
     }
 
     #[test]
+    fn a_wait_before_the_next_ask_brings_deadlines_forward() {
+        let t0 = Instant::now();
+        let p = plan(vec![item(1, 6, 10_000)], t0);
+        assert!(p.list(t0, 0.05, MEASURED).is_empty());
+        // Two frames more before a later answer can come: six frames ahead is due now.
+        let waiting = Link {
+            wait_s: 0.1,
+            ..MEASURED
+        };
+        assert_eq!(p.list(t0, 0.05, waiting), vec![1]);
+    }
+
+    #[test]
     fn the_frame_lacks_go_first_and_alone_while_it_is_incomplete() {
         let t0 = Instant::now();
         let mut p = plan(vec![item(1, 0, 10), item(2, 0, 10)], t0);
@@ -184,6 +203,7 @@ mod tests {
             rate: None,
             rtt_s: None,
             in_flight: 0,
+            wait_s: 0.0,
         };
         assert_eq!(p.list(t0, 0.05, unknown), vec![1]);
         assert_eq!(

@@ -41,6 +41,8 @@ pub mod prefetch;
 #[cfg(feature = "native")]
 pub mod stats;
 pub mod texture;
+#[cfg(feature = "native")]
+pub mod tileset;
 
 pub use error::{DataError, Result};
 #[cfg(feature = "native")]

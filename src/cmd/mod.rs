@@ -5,6 +5,7 @@ pub mod build;
 pub mod built;
 pub mod cull;
 pub mod demo;
+pub mod export3dtiles;
 pub mod generate;
 pub mod inspect;
 pub mod loadtest;

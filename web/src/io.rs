@@ -19,7 +19,7 @@ use crate::stream::Stream;
 use portico_client::defaults;
 use portico_client::engine::catalogue::{Catalogue, Kind};
 use portico_client::engine::pages::{Pages, Readiness, TakenPage};
-use portico_client::engine::pull::{self, Command, Fault, FrameState, Pull};
+use portico_client::engine::pull::{self, Command, Fault, FrameState, Pull, Reask};
 use portico_client::engine::push::{self, Push, Pushed};
 use portico_client::engine::switch::{Carrier, Switch};
 use portico_protocol::{Observer, Policy, PrefetchResponse};
@@ -84,6 +84,7 @@ impl Io {
     /// A stage reading from `remote` under `policy`, keeping at most `window` bytes in flight
     /// or delivered and not yet taken.
     /// With `push`, segments come over `/v1/stream` while it works.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         remote: Rc<Remote>,
         catalogue: Catalogue,
@@ -91,6 +92,7 @@ impl Io {
         policy: Policy,
         window: u64,
         push: bool,
+        reask: Reask,
     ) -> Io {
         Io {
             switch: Switch::new(push),
@@ -100,7 +102,7 @@ impl Io {
             catalogue: Rc::new(RefCell::new(catalogue)),
             pages: pages.map(|p| Rc::new(RefCell::new(p))),
             policy,
-            pull: Pull::new(policy, defaults::PARALLEL, window),
+            pull: Pull::new(policy, defaults::PARALLEL, window).reasking(reask),
             inbox: Rc::new(RefCell::new(VecDeque::new())),
             stopped: false,
         }
@@ -239,6 +241,11 @@ impl Io {
             }
             self.stream = None;
         }
+    }
+
+    /// Bytes of prefetch requests and answers so far.
+    pub fn prefetch_bytes(&self) -> u64 {
+        self.remote.prefetch_bytes()
     }
 
     /// Stream sessions tried so far.

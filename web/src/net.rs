@@ -39,6 +39,8 @@ pub struct Remote {
     token: Option<String>,
     /// `/v1/db/{id}` once the manifest named the database (content-named segment URLs).
     database: RefCell<Option<String>>,
+    /// Bytes of prefetch requests and answers so far (bodies).
+    prefetch_bytes: std::cell::Cell<u64>,
 }
 
 /// A JavaScript exception or rejection in one line.
@@ -56,7 +58,13 @@ impl Remote {
             base: base.trim_end_matches('/').to_string(),
             token,
             database: RefCell::new(None),
+            prefetch_bytes: Default::default(),
         }
+    }
+
+    /// Bytes of the prefetch requests sent and answers received so far (their bodies).
+    pub fn prefetch_bytes(&self) -> u64 {
+        self.prefetch_bytes.get()
     }
 
     /// The database id of the manifest read (`None` before it).
@@ -216,6 +224,8 @@ impl Remote {
         let url = format!("{}/prefetch", self.segments_base());
         let body = portico_protocol::to_bincode(req)?;
         let b = self.send(&url, Some(&body), "prefetch").await?;
+        let sent = (body.len() + b.len()) as u64;
+        self.prefetch_bytes.set(self.prefetch_bytes.get() + sent);
         portico_protocol::from_bincode(&b).map_err(|e| anyhow!("{url}: the answer: {e}"))
     }
 

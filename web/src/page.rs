@@ -10,6 +10,7 @@ use glam::Vec3;
 use portico_client::cache::split_budget;
 use portico_client::engine::catalogue::Start;
 use portico_client::engine::holdings::Holdings;
+use portico_client::engine::pull::Reask;
 use portico_client::frame::Decider;
 use portico_client::walk::Gait;
 use portico_data::cells::CellGraph;
@@ -158,6 +159,12 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
         .clamp(5.0, 1000.0);
     let backend = param("backend").unwrap_or_else(|| "auto".into());
     let push = param("transport").as_deref() != Some("pull");
+    // `?reask=always`: a prefetch request after every answer, as before the pull engine
+    // waited for the observer to move on (for measuring what that saves).
+    let reask = match param("reask").as_deref() {
+        Some("always") => Reask::ALWAYS,
+        _ => Reask::DEFAULT,
+    };
 
     let remote = Rc::new(Remote::new(&server, token));
     let loaded = load(&remote, param("manifest").as_deref() != Some("whole"))
@@ -260,6 +267,7 @@ pub async fn start(canvas_id: String, overlay_id: String) -> Result<Handle, JsVa
             policy,
             window_bytes,
             push,
+            reask,
         ),
         nav: navigator(eye, dir),
         gait: Gait::Walk,

@@ -98,8 +98,11 @@ pub struct Stats {
     pub first_complete_frame: Option<u64>,
     /// See [`Stats::first_complete_frame`].
     pub first_complete_ms: Option<f64>,
-    /// Prefetch answers received (one request in flight at a time, one per frame at most).
+    /// Prefetch answers received (one request in flight at a time, asked again once the
+    /// observer has moved on: [`portico_client::engine::pull::Reask`]).
     pub answers: u64,
+    /// Bytes of prefetch requests and answers (bodies), beside [`Stats::bytes_received`].
+    pub prefetch_bytes: u64,
     /// Requests that failed.
     pub failures: u64,
     /// The last failure.
@@ -367,6 +370,7 @@ impl Viewer {
         );
         self.stats.transport = self.io.transport();
         self.stats.stream_sessions = self.io.sessions();
+        self.stats.prefetch_bytes = self.io.prefetch_bytes();
         self.stats.eye = eye.to_array();
         self.stats.dir = dir.to_array();
         self.stats.resident_bytes = self.held.cache.bytes();

@@ -3,8 +3,11 @@
 //! and the time, and says which request to send next ([`Pull::poll`]).
 //!
 //! - One prefetch request at a time: a newer frame waits for the answer in flight, then asks
-//!   with the latest observer. After a failed request, [`BACKOFF`] passes before the next (a
-//!   server that is down is not asked sixty times a second).
+//!   with the latest observer — once the answer in hand has aged or the observer has moved,
+//!   turned or changed pace enough to change it ([`Reask`]): a walker's answers would
+//!   otherwise cost more bytes than the geometry they bring. After a failed request,
+//!   [`BACKOFF`] passes before the next (a server that is down is not asked sixty times a
+//!   second).
 //! - Up to `parallel` read requests from the top of the latest read list: what the latest frame
 //!   lacked, then what of the server's answer cannot wait for a later one
 //!   ([`crate::deadline::ReadPlan`]), or the client's own list ([`Pull::want`]: demand fetch,
@@ -27,6 +30,84 @@ use web_time::Instant;
 
 /// How long after a failed prefetch request the next may go.
 pub const BACKOFF: Duration = Duration::from_millis(500);
+
+/// When the answer in hand no longer stands and a new prefetch request is worth its bytes.
+/// The server's answer follows the observer's place (the predicted lookahead shares one list
+/// per cell, 1 m cube, view bucket of about 11° and velocity bucket) and the cache's contents;
+/// what the cache took meanwhile is read past anyway (the read list skips what is held), so
+/// asking again pays only once the observer has moved on.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reask {
+    /// The eye has moved this far (metres) from where the last request stood...
+    pub moved_m: f32,
+    /// ...or the view has turned this far (radians)...
+    pub turned_rad: f32,
+    /// ...or the velocity has changed this much (m/s)...
+    pub velocity: f32,
+    /// ...or the turn rate this much (rad/s)...
+    pub turn: f32,
+    /// ...or the last request is this old (seconds).
+    pub age_s: f32,
+}
+
+impl Reask {
+    /// After every answer, whatever changed (every front end before #43).
+    pub const ALWAYS: Reask = Reask {
+        moved_m: 0.0,
+        turned_rad: 0.0,
+        velocity: 0.0,
+        turn: 0.0,
+        age_s: 0.0,
+    };
+
+    /// Half the server's place cube, about half its view bucket, a sixth of a walking pace, a
+    /// second.
+    pub const DEFAULT: Reask = Reask {
+        moved_m: 0.5,
+        turned_rad: 0.1,
+        velocity: 0.25,
+        turn: 0.1,
+        age_s: 1.0,
+    };
+
+    /// Whether `now` an observer `o` is worth a new request, the last having gone for `last`
+    /// at `at`.
+    pub fn due(&self, last: &Observer, at: Instant, o: &Observer, now: Instant) -> bool {
+        let v = |a: [f32; 3]| glam::Vec3::from(a);
+        let turned = v(last.dir)
+            .normalize_or_zero()
+            .angle_between(v(o.dir).normalize_or_zero());
+        now.saturating_duration_since(at).as_secs_f32() >= self.age_s
+            || v(o.eye).distance(v(last.eye)) >= self.moved_m
+            || turned >= self.turned_rad
+            || v(o.velocity).distance(v(last.velocity)) >= self.velocity
+            || v(o.turn).distance(v(last.turn)) >= self.turn
+    }
+
+    /// How long (seconds) the next request may wait for `o` moving as it does now: until it
+    /// has moved or turned past the thresholds, at most the age.
+    pub fn wait_s(&self, o: &Observer) -> f64 {
+        let v = |a: [f32; 3]| glam::Vec3::from(a).length();
+        let until = |limit: f32, rate: f32| {
+            if rate > 1e-6 {
+                limit / rate
+            } else {
+                f32::INFINITY
+            }
+        };
+        let s = self
+            .age_s
+            .min(until(self.moved_m, v(o.velocity)))
+            .min(until(self.turned_rad, v(o.turn)));
+        f64::from(s.max(0.0))
+    }
+}
+
+impl Default for Reask {
+    fn default() -> Self {
+        Reask::DEFAULT
+    }
+}
 
 /// What the frame loop publishes after each frame, for the server's lookahead.
 #[derive(Debug, Clone)]
@@ -104,6 +185,12 @@ pub struct Pull {
     ask_after: Option<Instant>,
     /// The latest frame the server has not been asked about: its observer and held set.
     unasked: Option<(Observer, Vec<u32>)>,
+    /// When to ask again, and the observer of the last request that was answered and when it
+    /// went.
+    reask: Reask,
+    last_asked: Option<(Observer, Instant)>,
+    /// The observer of the request in flight and when it went.
+    in_flight_ask: Option<(Observer, Instant)>,
     /// Read requests in flight: what each asked for and when it was sent.
     reads: HashMap<u64, (Vec<u32>, Instant)>,
     tickets: u64,
@@ -125,11 +212,20 @@ impl Pull {
             asking: false,
             ask_after: None,
             unasked: None,
+            reask: Reask::DEFAULT,
+            last_asked: None,
+            in_flight_ask: None,
             reads: HashMap::new(),
             tickets: 0,
             events: 0,
             stopped: false,
         }
+    }
+
+    /// Pull asking again as `reask` says ([`Reask::ALWAYS`]: after every answer).
+    pub fn reasking(mut self, reask: Reask) -> Pull {
+        self.reask = reask;
+        self
     }
 
     /// Pull taking over after another transport handed `events` to the frame loop (they count
@@ -197,12 +293,19 @@ impl Pull {
         if self.stopped {
             return None;
         }
+        let due = |(o, _): &(Observer, Vec<u32>)| {
+            self.last_asked
+                .as_ref()
+                .is_none_or(|(last, at)| self.reask.due(last, *at, o, now))
+        };
         if !self.asking
             && self.ask_after.is_none_or(|t| now >= t)
+            && self.unasked.as_ref().is_some_and(due)
             && let Some((observer, cached)) = self.unasked.take()
         {
             self.asking = true;
             self.ask_after = None;
+            self.in_flight_ask = Some((observer, now));
             let held: HashSet<u32> = cached.into_iter().chain(self.schedule.pending()).collect();
             let number = self.schedule.asked();
             let req = PrefetchRequest {
@@ -239,12 +342,14 @@ impl Pull {
         self.asking = false;
         let event = match answer {
             Ok(resp) => {
+                self.last_asked = self.in_flight_ask.take();
                 self.schedule.answered(number);
                 self.plan.answered(resp.items.clone(), at);
                 self.refresh(now, at);
                 Event::Answer(Box::new(resp))
             }
             Err(fault) => {
+                self.in_flight_ask = None;
                 self.ask_after = Some(now + BACKOFF);
                 self.fault(fault)
             }
@@ -311,10 +416,14 @@ impl Pull {
 
     /// The read list from the plan at `now`, for need lists first listed at `at`.
     fn refresh(&mut self, now: Instant, at: Instant) {
+        // The latest observer heard of: how long the next request may wait depends on its pace.
+        let latest =
+            (self.unasked.as_ref().map(|(o, _)| o)).or(self.last_asked.as_ref().map(|(o, _)| o));
         let link = Link {
             rate: self.meter.rate(),
             rtt_s: self.meter.rtt_s(),
             in_flight: self.schedule.wire_bytes(),
+            wait_s: latest.map_or(0.0, |o| self.reask.wait_s(o)),
         };
         let list = self
             .plan

@@ -4,12 +4,12 @@
 //!
 //! - **walls**: the body is a few vertical probes (its centre and four points at its radius, at
 //!   knee, chest and head height), and each moves only through open space, from a cell to the
-//!   next through a portal ([`space`]); a move a probe cannot make is tried again along each
+//!   next through a portal (`space.rs`); a move a probe cannot make is tried again along each
 //!   axis alone, so the body slides along a wall (cells are axis-aligned);
 //! - **objects**: the boxes of the placed objects near the body that reach between a step above
 //!   its feet and the top of its head stop it; those below a step are stepped onto;
 //! - **floors**: the eye stays [`EYE_HEIGHT`] above the floor below it: the highest of the cell
-//!   bottoms under it (down through holes: [`space::floor`]) and the objects stepped onto.
+//!   bottoms under it (down through holes: `space::floor`) and the objects stepped onto.
 //!   Steps down are taken at once; a drop deeper than a step is fallen, under gravity;
 //! - **stairs**: an object that rises more than a step and meets a floor at its foot and the
 //!   next floor at its head (a flight, as stair objects are modelled in BIM exports and by the

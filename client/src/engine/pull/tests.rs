@@ -166,7 +166,7 @@ fn one_prefetch_request_at_a_time_with_the_latest_observer() {
 #[test]
 fn the_held_set_sent_names_what_is_on_its_way() {
     let t0 = Instant::now();
-    let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
+    let mut pull = Pull::new(Policy::default(), 8, 1 << 30).reasking(Reask::ALWAYS);
     let f = FrameState {
         held: vec![1, 2],
         ..frame(vec![5], 0)
@@ -189,6 +189,68 @@ fn the_held_set_sent_names_what_is_on_its_way() {
         Some(vec![5]),
         "in flight"
     );
+}
+
+#[test]
+fn a_walker_asks_again_once_it_has_moved_turned_or_waited_not_after_every_answer() {
+    let t0 = Instant::now();
+    let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
+    let at = |x: f32, dir: [f32; 3]| FrameState {
+        observer: Observer {
+            dir,
+            ..crate::engine::test_observer(x)
+        },
+        ..frame(vec![], 0)
+    };
+    let ahead = [0.0, 0.0, -1.0];
+    pull.frame(at(0.0, ahead), t0, t0);
+    assert_eq!(asks(&drain(&mut pull, t0)), vec![1]);
+    pull.answered(1, t0, Ok(answer(&[], &[])), ms(t0, 20));
+    // Standing, or a few centimetres on: the answer in hand stands.
+    for (i, x) in [0.0, 0.1, 0.3].into_iter().enumerate() {
+        let now = ms(t0, 40 + 20 * i as u64);
+        pull.frame(at(x, ahead), now, now);
+        assert!(asks(&drain(&mut pull, now)).is_empty(), "asked at x = {x}");
+    }
+    // Half a metre on: asked again.
+    pull.frame(at(0.5, ahead), ms(t0, 100), ms(t0, 100));
+    assert_eq!(asks(&drain(&mut pull, ms(t0, 100))), vec![2]);
+    pull.answered(2, ms(t0, 100), Ok(answer(&[], &[])), ms(t0, 120));
+    // Turned by 0.2 rad where it stands: asked again.
+    let turned = [0.2f32.sin(), 0.0, -0.2f32.cos()];
+    pull.frame(at(0.5, turned), ms(t0, 140), ms(t0, 140));
+    assert_eq!(asks(&drain(&mut pull, ms(t0, 140))), vec![3]);
+    pull.answered(3, ms(t0, 140), Ok(answer(&[], &[])), ms(t0, 160));
+    // Nothing changes for a second: asked again, the answer having aged.
+    pull.frame(at(0.5, turned), ms(t0, 900), ms(t0, 900));
+    assert!(asks(&drain(&mut pull, ms(t0, 900))).is_empty());
+    pull.frame(at(0.5, turned), ms(t0, 1150), ms(t0, 1150));
+    assert_eq!(asks(&drain(&mut pull, ms(t0, 1150))), vec![4]);
+    // Asking after every answer, as before: the same observer is asked about again.
+    let mut every = Pull::new(Policy::default(), 8, 1 << 30).reasking(Reask::ALWAYS);
+    every.frame(at(0.0, ahead), t0, t0);
+    assert_eq!(asks(&drain(&mut every, t0)), vec![1]);
+    every.answered(1, t0, Ok(answer(&[], &[])), ms(t0, 20));
+    every.frame(at(0.0, ahead), ms(t0, 40), ms(t0, 40));
+    assert_eq!(asks(&drain(&mut every, ms(t0, 40))), vec![2]);
+}
+
+#[test]
+fn the_wait_before_the_next_ask_follows_the_pace() {
+    let r = Reask::DEFAULT;
+    let still = crate::engine::test_observer(0.0);
+    assert_eq!(r.wait_s(&still), 1.0);
+    let walking = Observer {
+        velocity: [1.5, 0.0, 0.0],
+        ..still
+    };
+    assert!((r.wait_s(&walking) - 0.5 / 1.5).abs() < 1e-6);
+    let turning = Observer {
+        turn: [0.0, 1.0, 0.0],
+        ..walking
+    };
+    assert!((r.wait_s(&turning) - 0.1).abs() < 1e-6);
+    assert_eq!(Reask::ALWAYS.wait_s(&turning), 0.0);
 }
 
 #[test]
