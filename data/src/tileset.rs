@@ -4,11 +4,12 @@
 //!
 //! The tiles are a k-D tree over the instances' box centres, split at the median of the longest
 //! axis until a node's instances hold at most `leaf_triangles` ([`LEAF_TRIANGLES`] by default)
-//! triangles at their finest LOD (or one instance). A leaf draws its instances at their finest LOD; an inner node draws every
-//! instance below it at its coarsest LOD (a hierarchical LOD), and its children replace it
-//! (`REPLACE` refinement) once its geometric error — the largest error of those coarse LODs,
-//! in metres (Portico's own LOD error) — would show. Each tile is one glTF mesh: positions,
-//! normals and vertex colours (the importers multiply the material's colour into them), the
+//! triangles at their finest LOD (or one instance). Each instance is drawn once, at its finest
+//! LOD, in the highest tile whose box it is large in (its box's diagonal at least [`KEEP`] of
+//! the tile's): walls and slabs near the root, furniture deeper, small things in the leaves.
+//! Children add to their parent (`ADD` refinement) once the parent's geometric error — the
+//! largest diagonal of what its children hold, in metres — would show. Each tile is one glTF
+//! mesh: positions, normals and vertex colours (the importers multiply the material's colour into them), the
 //! instances' transforms applied. Textures are left out. Coordinates are Portico's metres, Y up,
 //! as glTF content is; the bounding volumes are in 3D Tiles' Z-up frame (`(x, y, z)` becomes
 //! `(x, −z, y)`), the rotation every 3D Tiles viewer applies to glTF content.
@@ -20,6 +21,9 @@ use glam::{Mat4, Vec3};
 use serde_json::{Value, json};
 use std::path::Path;
 
+/// A tile keeps the instances whose box's diagonal is at least this fraction of its own.
+pub const KEEP: f32 = 0.125;
+
 /// A leaf holds at most this many triangles at its instances' finest LODs, by default.
 pub const LEAF_TRIANGLES: u64 = 60_000;
 
@@ -30,8 +34,8 @@ pub struct Written {
     pub tiles: usize,
     /// Bytes of every file written.
     pub bytes: u64,
-    /// Triangles in the leaves (the finest LODs of every instance).
-    pub leaf_triangles: u64,
+    /// Triangles in every tile (the finest LODs of every instance, each once).
+    pub triangles: u64,
 }
 
 /// Writes `db` as a 3D Tiles tileset into `dir` (created if missing): `tileset.json` and
@@ -67,14 +71,12 @@ pub fn write(
     for k in (0..nodes.len()).rev() {
         let node = &nodes[k];
         let leaf = node.children.is_empty();
-        let (glb, error, triangles) = tile(db, &node.instances, leaf)?;
+        let (glb, triangles) = tile(db, &node.instances)?;
         let path = tiles_dir.join(format!("{k}.glb"));
         write_file(&path, &glb)?;
         written.tiles += 1;
         written.bytes += glb.len() as u64;
-        if leaf {
-            written.leaf_triangles += triangles;
-        }
+        written.triangles += triangles;
         let children: Vec<Value> = node
             .children
             .iter()
@@ -82,8 +84,8 @@ pub fn write(
             .collect();
         let mut t = json!({
             "boundingVolume": { "box": z_up_box(&node.bounds) },
-            "geometricError": if leaf { 0.0 } else { error.max(1e-3) },
-            "refine": "REPLACE",
+            "geometricError": if leaf { 0.0 } else { node.below.max(1e-3) },
+            "refine": "ADD",
             "content": { "uri": format!("tiles/{k}.glb") },
         });
         if !children.is_empty() {
@@ -112,41 +114,62 @@ pub fn write(
 /// One node of the tile tree.
 struct Node {
     bounds: Aabb,
+    /// What it draws.
     instances: Vec<u32>,
     children: Vec<usize>,
+    /// The largest diagonal (metres) of what its descendants draw: its geometric error.
+    below: f32,
 }
 
 /// Adds the node holding `items` and its subtree to `nodes` (pre-order); returns its index.
 fn split(
     header: &crate::format::Header,
-    mut items: Vec<u32>,
+    items: Vec<u32>,
     finest: &dyn Fn(u32) -> u64,
     leaf_triangles: u64,
     nodes: &mut Vec<Node>,
 ) -> usize {
-    let bounds = items.iter().fold(Aabb::EMPTY, |b, &i| {
-        b.union(&header.instances[i as usize].bounds)
-    });
+    let bounds_of = |i: &u32| header.instances[*i as usize].bounds;
+    let bounds = items
+        .iter()
+        .fold(Aabb::EMPTY, |b, i| b.union(&bounds_of(i)));
     let k = nodes.len();
     nodes.push(Node {
         bounds,
-        instances: items.clone(),
+        instances: Vec::new(),
         children: Vec::new(),
+        below: 0.0,
     });
     let triangles: u64 = items.iter().map(|&i| finest(i)).sum();
     if triangles <= leaf_triangles || items.len() < 2 {
+        nodes[k].instances = items;
+        return k;
+    }
+    let diagonal = |b: &Aabb| b.size().length();
+    let large = diagonal(&bounds) * KEEP;
+    let (kept, mut rest): (Vec<u32>, Vec<u32>) = items
+        .into_iter()
+        .partition(|i| diagonal(&bounds_of(i)) >= large);
+    nodes[k].instances = kept;
+    if rest.len() < 2 {
+        nodes[k].instances.extend(rest);
         return k;
     }
     let size = bounds.size();
     let axis = (0..3)
         .max_by(|&a, &b| size[a].total_cmp(&size[b]))
         .unwrap_or(0);
-    let centre = |i: &u32| header.instances[*i as usize].bounds.center()[axis];
-    items.sort_by(|a, b| centre(a).total_cmp(&centre(b)));
-    let high = items.split_off(items.len() / 2);
-    let lo = split(header, items, finest, leaf_triangles, nodes);
+    let centre = |i: &u32| bounds_of(i).center()[axis];
+    rest.sort_by(|a, b| centre(a).total_cmp(&centre(b)));
+    let below = rest
+        .iter()
+        .map(|i| diagonal(&bounds_of(i)))
+        .fold(0.0, f32::max);
+    let high = rest.split_off(rest.len() / 2);
+    let lo = split(header, rest, finest, leaf_triangles, nodes);
     let hi = split(header, high, finest, leaf_triangles, nodes);
     nodes[k].children = vec![lo, hi];
+    nodes[k].below = below;
     k
 }
 
@@ -166,9 +189,8 @@ fn z_up_box(b: &Aabb) -> Vec<f64> {
         .collect()
 }
 
-/// The binary glTF of `instances` at their finest LOD (`leaf`) or their coarsest, the largest
-/// geometric error (metres) of the LODs drawn, and the triangles.
-fn tile(db: &Database, instances: &[u32], leaf: bool) -> Result<(Vec<u8>, f32, u64)> {
+/// The binary glTF of `instances` at their finest LODs, and its triangles.
+fn tile(db: &Database, instances: &[u32]) -> Result<(Vec<u8>, u64)> {
     let header = db.header();
     let (mut positions, mut normals, mut colors, mut indices) = (
         Vec::<[f32; 3]>::new(),
@@ -176,14 +198,12 @@ fn tile(db: &Database, instances: &[u32], leaf: bool) -> Result<(Vec<u8>, f32, u
         Vec::<[u8; 4]>::new(),
         Vec::<u32>::new(),
     );
-    let mut error = 0.0f32;
     for &i in instances {
         let inst = &header.instances[i as usize];
         let lods = header.lods_of(inst);
-        let Some(lod) = (if leaf { lods.first() } else { lods.last() }) else {
+        let Some(lod) = lods.first() else {
             continue;
         };
-        error = error.max(lod.error);
         let bytes = db.geometry(lod)?;
         let mesh = GeometryView::parse(&bytes)
             .map_err(|e| DataError::corrupt(db.path(), format!("instance {i}: {e}")))?
@@ -200,11 +220,7 @@ fn tile(db: &Database, instances: &[u32], leaf: bool) -> Result<(Vec<u8>, f32, u
         indices.extend(mesh.indices.iter().map(|&x| x + base));
     }
     let triangles = indices.len() as u64 / 3;
-    Ok((
-        glb(&positions, &normals, &colors, &indices),
-        error,
-        triangles,
-    ))
+    Ok((glb(&positions, &normals, &colors, &indices), triangles))
 }
 
 /// A binary glTF 2.0 of one mesh of one primitive (a tile with nothing in it has no mesh).

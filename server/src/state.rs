@@ -43,7 +43,7 @@ pub struct AppState {
     manifest_json: OnceLock<Precompressed>,
     cells_json: OnceLock<Precompressed>,
     /// The model's standard tour as JSON, made on first use (`None`: the model has none).
-    pub tour: OnceLock<Option<Bytes>>,
+    pub tour: OnceLock<Option<Precompressed>>,
     /// One permit per allowed stream session.
     pub sessions: Arc<Semaphore>,
     /// Turns for the large stream messages decoded on the blocking pool (one per compute

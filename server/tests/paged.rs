@@ -237,4 +237,28 @@ async fn the_standard_tour_is_served_under_the_database() {
         r.json::<portico_data::path::CameraPath>().await.unwrap(),
         want
     );
+    // Gzip-coded for a client that takes it (a page reads the tour before its first frame),
+    // under its own ETag.
+    let raw = reqwest::Client::builder().no_gzip().build().unwrap();
+    let zipped = raw
+        .get(format!("{}/v1/tour", s.base))
+        .header("accept-encoding", "gzip")
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(zipped.headers()["content-encoding"], "gzip");
+    let plain = raw.get(format!("{}/v1/tour", s.base)).send().await.unwrap();
+    assert!(plain.headers().get("content-encoding").is_none());
+    assert_ne!(zipped.headers()["etag"], plain.headers()["etag"]);
+    let body = zipped.bytes().await.unwrap();
+    let mut json = Vec::new();
+    std::io::Read::read_to_end(&mut flate2::read::GzDecoder::new(&body[..]), &mut json).unwrap();
+    let unzipped: portico_data::path::CameraPath = serde_json::from_slice(&json).unwrap();
+    assert_eq!(unzipped, want);
+    assert!(
+        body.len() * 2 < json.len(),
+        "{} bytes gzip-coded of {}",
+        body.len(),
+        json.len()
+    );
 }

@@ -38,10 +38,10 @@ pub fn run(a: Args) -> Result<()> {
     .with_context(|| format!("exporting {} as 3D Tiles", a.file.display()))?;
     bars.finish();
     println!(
-        "wrote {} tiles ({:.1} MB, {} triangles at the finest LODs) to {} in {:.1} s",
+        "wrote {} tiles ({:.1} MB, {} triangles at the finest LODs, each object once) to {} in {:.1} s",
         written.tiles,
         written.bytes as f64 / 1e6,
-        written.leaf_triangles,
+        written.triangles,
         a.output.join("tileset.json").display(),
         t0.elapsed().as_secs_f64()
     );

@@ -60,14 +60,14 @@ impl Reask {
         age_s: 0.0,
     };
 
-    /// Half the server's place cube, about half its view bucket, a sixth of a walking pace, a
-    /// second.
+    /// The server's own grain: its place cube (1 m), about its view bucket (0.2 rad), a speed
+    /// band's width (a quarter of a walking pace), its turn band (0.25 rad/s); two seconds.
     pub const DEFAULT: Reask = Reask {
-        moved_m: 0.5,
-        turned_rad: 0.1,
-        velocity: 0.25,
-        turn: 0.1,
-        age_s: 1.0,
+        moved_m: 1.0,
+        turned_rad: 0.2,
+        velocity: 0.4,
+        turn: 0.25,
+        age_s: 2.0,
     };
 
     /// Whether `now` an observer `o` is worth a new request, the last having gone for `last`

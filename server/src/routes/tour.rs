@@ -4,6 +4,7 @@
 
 use super::Shared;
 use crate::conditional::not_modified;
+use crate::encoding::Precompressed;
 use crate::error::Error;
 use crate::respond::{IMMUTABLE, REVALIDATE, built, current, revalidated};
 use axum::body::{Body, Bytes};
@@ -19,14 +20,19 @@ pub const LEGS: usize = 6;
 /// `GET /v1/db/{database_id}/tour`: the standard tour as JSON (`portico_data::path::CameraPath`),
 /// made once on a compute slot; immutable (the URL names the database). 404 for a model with
 /// no tour (nothing to walk through).
-pub async fn tour_in(State(s): Shared, Path(db): Path<String>) -> Result<Response, Error> {
+pub async fn tour_in(
+    State(s): Shared,
+    Path(db): Path<String>,
+    headers: HeaderMap,
+) -> Result<Response, Error> {
     current(&s, &db)?;
-    answer(s, IMMUTABLE, &HeaderMap::new()).await
+    answer(s, IMMUTABLE, &headers).await
 }
 
 /// `GET /v1/tour`: the same under a URL a rebuild reuses (revalidated), for a client that asks
 /// for it before it knows the database (beside the core manifest).
-/// Revalidated with the database's ETag (`"t-{database_id}"`, 304 when it matches).
+/// Revalidated with the database's ETag (`"t-{database_id}"`, `"t-{database_id}-gzip"` for the
+/// gzip coding; 304 when it matches).
 pub async fn tour(State(s): Shared, headers: HeaderMap) -> Result<Response, Error> {
     answer(s, REVALIDATE, &headers).await
 }
@@ -36,10 +42,6 @@ async fn answer(
     cache: &'static str,
     headers: &HeaderMap,
 ) -> Result<Response, Error> {
-    let tag = format!("\"t-{}\"", s.database_id);
-    if not_modified(headers, &tag) {
-        return Ok(revalidated(StatusCode::NOT_MODIFIED.into_response(), &tag));
-    }
     let state = s.clone();
     let made = s
         .compute
@@ -61,7 +63,7 @@ async fn answer(
                     turn,
                 );
                 path.and_then(|p| serde_json::to_vec(&p).ok())
-                    .map(Bytes::from)
+                    .map(|j| Precompressed::new(Bytes::from(j)))
             });
             Ok(tour.clone())
         })
@@ -71,11 +73,25 @@ async fn answer(
             "this model has no tour (nothing to walk through)",
         ));
     };
-    built(
-        Response::builder()
-            .header(header::CONTENT_TYPE, portico_protocol::JSON_MIME)
-            .header(header::CACHE_CONTROL, cache)
-            .header(header::ETAG, tag)
-            .body(Body::from(json)),
-    )
+    // Gzip where the client takes it: a long tour is hundreds of kilobytes of JSON, which a
+    // page reads before its first frame.
+    let (body, coding) = json.pick(headers);
+    // Each coding is its own representation, with its own strong ETag.
+    let tag = format!(
+        "\"t-{}{}\"",
+        s.database_id,
+        coding.map_or(String::new(), |c| format!("-{c}"))
+    );
+    if not_modified(headers, &tag) {
+        return Ok(revalidated(StatusCode::NOT_MODIFIED.into_response(), &tag));
+    }
+    let mut r = Response::builder()
+        .header(header::CONTENT_TYPE, portico_protocol::JSON_MIME)
+        .header(header::CACHE_CONTROL, cache)
+        .header(header::ETAG, tag)
+        .header(header::VARY, "accept-encoding");
+    if let Some(c) = coding {
+        r = r.header(header::CONTENT_ENCODING, c);
+    }
+    built(r.body(Body::from(body)))
 }

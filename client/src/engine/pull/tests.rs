@@ -194,6 +194,7 @@ fn the_held_set_sent_names_what_is_on_its_way() {
 #[test]
 fn a_walker_asks_again_once_it_has_moved_turned_or_waited_not_after_every_answer() {
     let t0 = Instant::now();
+    let r = Reask::DEFAULT;
     let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
     let at = |x: f32, dir: [f32; 3]| FrameState {
         observer: Observer {
@@ -206,26 +207,35 @@ fn a_walker_asks_again_once_it_has_moved_turned_or_waited_not_after_every_answer
     pull.frame(at(0.0, ahead), t0, t0);
     assert_eq!(asks(&drain(&mut pull, t0)), vec![1]);
     pull.answered(1, t0, Ok(answer(&[], &[])), ms(t0, 20));
-    // Standing, or a few centimetres on: the answer in hand stands.
-    for (i, x) in [0.0, 0.1, 0.3].into_iter().enumerate() {
+    // Standing, or not yet as far as the threshold: the answer in hand stands.
+    for (i, f) in [0.0, 0.2, 0.9].into_iter().enumerate() {
         let now = ms(t0, 40 + 20 * i as u64);
-        pull.frame(at(x, ahead), now, now);
-        assert!(asks(&drain(&mut pull, now)).is_empty(), "asked at x = {x}");
+        pull.frame(at(f * r.moved_m, ahead), now, now);
+        assert!(
+            asks(&drain(&mut pull, now)).is_empty(),
+            "asked at {f} of the way"
+        );
     }
-    // Half a metre on: asked again.
-    pull.frame(at(0.5, ahead), ms(t0, 100), ms(t0, 100));
+    // As far as the threshold: asked again.
+    pull.frame(at(r.moved_m, ahead), ms(t0, 100), ms(t0, 100));
     assert_eq!(asks(&drain(&mut pull, ms(t0, 100))), vec![2]);
     pull.answered(2, ms(t0, 100), Ok(answer(&[], &[])), ms(t0, 120));
-    // Turned by 0.2 rad where it stands: asked again.
-    let turned = [0.2f32.sin(), 0.0, -0.2f32.cos()];
-    pull.frame(at(0.5, turned), ms(t0, 140), ms(t0, 140));
+    // Turned past the threshold where it stands: asked again.
+    let a = r.turned_rad * 1.01;
+    let turned = [a.sin(), 0.0, -a.cos()];
+    pull.frame(at(r.moved_m, turned), ms(t0, 140), ms(t0, 140));
     assert_eq!(asks(&drain(&mut pull, ms(t0, 140))), vec![3]);
     pull.answered(3, ms(t0, 140), Ok(answer(&[], &[])), ms(t0, 160));
-    // Nothing changes for a second: asked again, the answer having aged.
-    pull.frame(at(0.5, turned), ms(t0, 900), ms(t0, 900));
-    assert!(asks(&drain(&mut pull, ms(t0, 900))).is_empty());
-    pull.frame(at(0.5, turned), ms(t0, 1150), ms(t0, 1150));
-    assert_eq!(asks(&drain(&mut pull, ms(t0, 1150))), vec![4]);
+    // Nothing changes: asked again once the answer has aged.
+    let aged = ms(t0, 140 + (r.age_s * 1000.0) as u64);
+    pull.frame(
+        at(r.moved_m, turned),
+        aged - Duration::from_millis(50),
+        aged - Duration::from_millis(50),
+    );
+    assert!(asks(&drain(&mut pull, aged - Duration::from_millis(50))).is_empty());
+    pull.frame(at(r.moved_m, turned), aged, aged);
+    assert_eq!(asks(&drain(&mut pull, aged)), vec![4]);
     // Asking after every answer, as before: the same observer is asked about again.
     let mut every = Pull::new(Policy::default(), 8, 1 << 30).reasking(Reask::ALWAYS);
     every.frame(at(0.0, ahead), t0, t0);
@@ -239,17 +249,17 @@ fn a_walker_asks_again_once_it_has_moved_turned_or_waited_not_after_every_answer
 fn the_wait_before_the_next_ask_follows_the_pace() {
     let r = Reask::DEFAULT;
     let still = crate::engine::test_observer(0.0);
-    assert_eq!(r.wait_s(&still), 1.0);
+    assert_eq!(r.wait_s(&still), f64::from(r.age_s));
     let walking = Observer {
         velocity: [1.5, 0.0, 0.0],
         ..still
     };
-    assert!((r.wait_s(&walking) - 0.5 / 1.5).abs() < 1e-6);
+    assert!((r.wait_s(&walking) - f64::from(r.moved_m / 1.5)).abs() < 1e-6);
     let turning = Observer {
-        turn: [0.0, 1.0, 0.0],
+        turn: [0.0, 4.0, 0.0],
         ..walking
     };
-    assert!((r.wait_s(&turning) - 0.1).abs() < 1e-6);
+    assert!((r.wait_s(&turning) - f64::from(r.turned_rad / 4.0)).abs() < 1e-6);
     assert_eq!(Reask::ALWAYS.wait_s(&turning), 0.0);
 }
 
