@@ -56,19 +56,11 @@ def parse_link(spec):
         sys.exit(f"--link {spec!r}: expected LATENCYms,RATE(k|m|g)bit, e.g. 50ms,10mbit")
 
 
-def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--server", default="http://127.0.0.1:7878")
-    ap.add_argument("--link", help="emulated link, e.g. 50ms,10mbit")
-    ap.add_argument("--seconds", type=float, default=20.0, help="how long the tour plays")
-    ap.add_argument("--size", default="640x480", help="the canvas's size in CSS pixels")
-    ap.add_argument("--query", default="backend=webgl", help="the page's query string")
-    ap.add_argument("--screenshot", help="save the canvas (with the overlay) at the end of the tour here (PNG)")
-    a = ap.parse_args()
-    w, h = (int(v) for v in a.size.split("x"))
+def chromium(w, h, link):
+    """Starts chromedriver and a headless Chromium session (WebGL2 on SwiftShader, a window
+    for a `w`×`h` canvas, `link` emulated if given). Returns the driver process (its own
+    process group: `os.killpg` ends every Chromium it started), its URL and the session path."""
     port = free_port()
-    # A process group of its own: killing it ends every Chromium it started, however this
-    # script ends.
     driver = subprocess.Popen(["chromedriver", f"--port={port}"], process_group=0,
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     base = f"http://127.0.0.1:{port}"
@@ -86,11 +78,29 @@ def main():
                      f"--window-size={w + 100},{h + 300}", "--force-device-scale-factor=1"]}}}}
         sid = call(base, "POST", "/session", caps)["sessionId"]
         s = f"/session/{sid}"
-        if a.link:
-            ms, rate = parse_link(a.link)
+        if link:
+            ms, rate = parse_link(link)
             call(base, "POST", f"{s}/chromium/network_conditions", {"network_conditions": {
                 "offline": False, "latency": ms, "download_throughput": rate,
                 "upload_throughput": rate}})
+        return driver, base, s
+    except BaseException:
+        os.killpg(driver.pid, signal.SIGKILL)
+        raise
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--server", default="http://127.0.0.1:7878")
+    ap.add_argument("--link", help="emulated link, e.g. 50ms,10mbit")
+    ap.add_argument("--seconds", type=float, default=20.0, help="how long the tour plays")
+    ap.add_argument("--size", default="640x480", help="the canvas's size in CSS pixels")
+    ap.add_argument("--query", default="backend=webgl", help="the page's query string")
+    ap.add_argument("--screenshot", help="save the canvas (with the overlay) at the end of the tour here (PNG)")
+    a = ap.parse_args()
+    w, h = (int(v) for v in a.size.split("x"))
+    driver, base, s = chromium(w, h, a.link)
+    try:
         # The page fills its window; the canvas is then set to the asked size (the viewer
         # follows its canvas's size every frame).
         call(base, "POST", f"{s}/url", {"url": f"{a.server}/?{a.query}"})

@@ -31,7 +31,7 @@ import threading
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from browser import call, free_port, parse_link  # noqa: E402
+from browser import call, chromium, free_port  # noqa: E402
 
 HERE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "peer")
 
@@ -113,29 +113,8 @@ def main():
 
 
 def measure(a, server, w, h):
-    port = free_port()
-    driver = subprocess.Popen(["chromedriver", f"--port={port}"], process_group=0,
-                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    base = f"http://127.0.0.1:{port}"
+    driver, base, s = chromium(w, h, a.link)
     try:
-        for _ in range(100):
-            try:
-                call(base, "GET", "/status")
-                break
-            except OSError:
-                time.sleep(0.1)
-        caps = {"capabilities": {"alwaysMatch": {"goog:chromeOptions": {
-            "binary": "/usr/bin/chromium",
-            "args": ["--headless=new", "--no-sandbox", "--disable-dev-shm-usage",
-                     "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
-                     f"--window-size={w + 100},{h + 300}", "--force-device-scale-factor=1"]}}}}
-        sid = call(base, "POST", "/session", caps)["sessionId"]
-        s = f"/session/{sid}"
-        if a.link:
-            ms, rate = parse_link(a.link)
-            call(base, "POST", f"{s}/chromium/network_conditions", {"network_conditions": {
-                "offline": False, "latency": ms, "download_throughput": rate,
-                "upload_throughput": rate}})
         call(base, "POST", f"{s}/url",
              {"url": f"{server}/index.html?size={w}x{h}&error_target={a.error_target}"})
 
