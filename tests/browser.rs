@@ -535,13 +535,15 @@ async fn walk_and_pick(c: &Client, dir: &Path) {
     };
     let (start, toward) = [flight.min[0] - 0.6, flight.max[0] + 0.6]
         .into_iter()
-        .map(|side| {
-            // Dropped onto the upper floor there.
+        .filter_map(|side| {
+            // On the floor under a point a little below the flight's top (the upper storey).
             let toward = Vec3::new(x - side, 0.0, 0.0).normalize();
-            (
-                native(Vec3::new(side, flight.max[1] + 0.5, z), toward, 1.0 / 30.0),
+            let above = Vec3::new(side, flight.max[1] - 0.2, z);
+            let floor = Walker::new().ground(&graph, above)?;
+            Some((
+                Vec3::new(side, floor + portico_client::walk::EYE_HEIGHT, z),
                 toward,
-            )
+            ))
         })
         .find(|&(s, t)| native(s, t, 2.0).y < s.y - 1.0)
         .expect("a side of the hole with a floor");

@@ -1,6 +1,7 @@
 //! A display database written as OGC 3D Tiles 1.1 (`tileset.json` and one binary glTF per tile),
-//! for Cesium, 3DTilesRenderer and every other 3D Tiles viewer, and for measuring Portico
-//! against them on the same building (`portico export-3dtiles`).
+//! for 3DTilesRenderer, Cesium and other 3D Tiles viewers, and for measuring Portico against
+//! them on the same building (`portico export-3dtiles`). The tileset is local (no root
+//! transform): a globe viewer such as Cesium places it at the Earth's centre until given one.
 //!
 //! The tiles are a k-D tree over the instances' box centres, split at the median of the longest
 //! axis until a node's instances hold at most `leaf_triangles` ([`LEAF_TRIANGLES`] by default)
@@ -39,7 +40,7 @@ pub struct Written {
 }
 
 /// Writes `db` as a 3D Tiles tileset into `dir` (created if missing): `tileset.json` and
-/// `tiles/N.glb`, leaves of at most `leaf_triangles`. `progress` hears each tile written and
+/// `tiles/N.glb` (for each tile that holds something), leaves of at most `leaf_triangles`. `progress` hears each tile written and
 /// the count. Errors name the file.
 pub fn write(
     db: &Database,
@@ -71,12 +72,19 @@ pub fn write(
     for k in (0..nodes.len()).rev() {
         let node = &nodes[k];
         let leaf = node.children.is_empty();
-        let (glb, triangles) = tile(db, &node.instances)?;
-        let path = tiles_dir.join(format!("{k}.glb"));
-        write_file(&path, &glb)?;
+        // A tile with nothing of its own (no object large in it) has no content: glTF has no
+        // empty scene, and a viewer would fetch it for nothing.
+        let content = if node.instances.is_empty() {
+            None
+        } else {
+            let (glb, triangles) = tile(db, &node.instances)?;
+            let path = tiles_dir.join(format!("{k}.glb"));
+            write_file(&path, &glb)?;
+            written.bytes += glb.len() as u64;
+            written.triangles += triangles;
+            Some(format!("tiles/{k}.glb"))
+        };
         written.tiles += 1;
-        written.bytes += glb.len() as u64;
-        written.triangles += triangles;
         let children: Vec<Value> = node
             .children
             .iter()
@@ -86,8 +94,10 @@ pub fn write(
             "boundingVolume": { "box": z_up_box(&node.bounds) },
             "geometricError": if leaf { 0.0 } else { node.below.max(1e-3) },
             "refine": "ADD",
-            "content": { "uri": format!("tiles/{k}.glb") },
         });
+        if let Some(uri) = content {
+            t["content"] = json!({ "uri": uri });
+        }
         if !children.is_empty() {
             t["children"] = Value::Array(children);
         }

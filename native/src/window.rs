@@ -207,8 +207,10 @@ impl App<'_> {
             && let Some(session) = self.session.as_mut()
         {
             self.nav.eye = session.walk(self.eye, self.nav.eye, dt);
+            // Along the floor: a step taken in one frame is not a climb at metres a second.
+            let moved = self.nav.eye - self.eye;
             velocity = if dt > 0.0 {
-                (self.nav.eye - self.eye) / dt
+                Vec3::new(moved.x, 0.0, moved.z) / dt
             } else {
                 Vec3::ZERO
             };
@@ -319,6 +321,9 @@ impl ApplicationHandler for App<'_> {
                         Gait::Walk => Gait::Fly,
                         Gait::Fly => Gait::Walk,
                     };
+                    if let Some(session) = self.session.as_mut() {
+                        session.reset_walk();
+                    }
                 } else if let Some(step) = key_step(code) {
                     self.nav.step(step);
                 }

@@ -233,6 +233,20 @@ async fn the_standard_tour_is_served_under_the_database() {
         .await
         .unwrap();
     assert_eq!(again.status(), 304, "revalidated, not sent again");
+    assert_eq!(again.headers()["cache-control"], "no-cache");
+    // Under the database's URL a 304 keeps the copy immutable (its headers update the cached
+    // ones).
+    let url = format!("{}/v1/db/{id}/tour", s.base);
+    let first = get(&http, &url).await;
+    let kept = http
+        .get(&url)
+        .header("if-none-match", first.headers()["etag"].clone())
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(kept.status(), 304);
+    assert_eq!(kept.headers()["cache-control"], portico_server::IMMUTABLE);
+    assert_eq!(kept.headers()["vary"], first.headers()["vary"]);
     assert_eq!(
         r.json::<portico_data::path::CameraPath>().await.unwrap(),
         want

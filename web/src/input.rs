@@ -115,10 +115,16 @@ impl Input {
         self.controls.spin = false;
     }
 
-    /// Moves `nav` by `dt` seconds of what is held; returns the velocity (m/s).
-    pub fn apply(&self, nav: &mut Navigator, dt: f32) -> Vec3 {
+    /// Moves `nav` by `dt` seconds of what is held at `now_ms` (the events' clock); returns
+    /// the velocity (m/s). A left press walks only once it has lasted longer than a click:
+    /// a click picks in the view it was made in.
+    pub fn apply(&self, nav: &mut Navigator, dt: f32, now_ms: f64) -> Vec3 {
         let before = nav.eye;
-        nav.update(&self.controls, dt);
+        let mut controls = self.controls;
+        if self.pressed.is_some_and(|(t, _)| now_ms - t < CLICK_MS) {
+            controls.forward = false;
+        }
+        nav.update(&controls, dt);
         let held = |a: &str, b: &str| self.keys.contains(a) || self.keys.contains(b);
         let axis = |plus: bool, minus: bool| f32::from(u8::from(plus)) - f32::from(u8::from(minus));
         let walk = axis(held("KeyW", "ArrowUp"), held("KeyS", "ArrowDown"));
@@ -146,7 +152,7 @@ mod tests {
         let mut nav = Navigator::new(Vec3::ZERO, Vec3::X, 2.0, 2.0);
         let mut input = Input::default();
         assert!(input.key_down("KeyW"));
-        let v = input.apply(&mut nav, 0.5);
+        let v = input.apply(&mut nav, 0.5, 0.0);
         assert!(
             (nav.eye - Vec3::new(1.0, 0.0, 0.0)).length() < 1e-5,
             "{}",
@@ -155,7 +161,7 @@ mod tests {
         assert!((v - Vec3::new(2.0, 0.0, 0.0)).length() < 1e-4);
         input.key_up("KeyW");
         assert!(input.key_down("KeyE"));
-        input.apply(&mut nav, 0.5);
+        input.apply(&mut nav, 0.5, 0.0);
         assert!((nav.yaw - 0.5).abs() < 1e-5, "{}", nav.yaw);
         assert!(
             !input.key_down("KeyZ"),
@@ -180,5 +186,16 @@ mod tests {
         input.pointer_up(1100.0);
         assert_eq!(input.click, None, "the right button walks back");
         assert!(input.key_down("KeyG") && input.toggle_gait);
+    }
+
+    #[test]
+    fn a_press_walks_only_once_it_is_longer_than_a_click() {
+        let mut nav = Navigator::new(Vec3::ZERO, Vec3::X, 2.0, 2.0);
+        let mut input = Input::default();
+        input.pointer_down(0, [0.0, 0.0], false, 1000.0);
+        input.apply(&mut nav, 0.1, 1100.0);
+        assert_eq!(nav.eye, Vec3::ZERO, "still a click");
+        input.apply(&mut nav, 0.1, 1400.0);
+        assert!(nav.eye.x > 0.0, "held: walking");
     }
 }

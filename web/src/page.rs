@@ -64,7 +64,11 @@ impl Handle {
         let mut v = self.viewer.borrow_mut();
         v.gait = match name {
             "fly" => Gait::Fly,
-            _ => Gait::Walk,
+            "walk" => Gait::Walk,
+            other => {
+                web_sys::console::warn_1(&format!("portico: gait({other:?}): walk or fly").into());
+                return;
+            }
         };
         v.walker.reset();
     }
@@ -497,10 +501,18 @@ fn run_frames(
                 if let Some(o) = &overlay {
                     o.set_text_content(Some(&overlay_text(&v.stats)));
                 }
-                // The pick panel: what the last click or tap named.
-                if let (Some(p), Some(picked)) = (&panel, &v.stats.picked) {
-                    p.set_text_content(Some(&picked.lines()));
-                    let _ = p.set_attribute("style", "display: block");
+                // The pick panel: what the last click or tap named (hidden after a click on
+                // nothing).
+                if let Some(p) = &panel {
+                    match &v.stats.picked {
+                        Some(picked) => {
+                            p.set_text_content(Some(&picked.lines()));
+                            let _ = p.set_attribute("style", "display: block");
+                        }
+                        None => {
+                            let _ = p.set_attribute("style", "display: none");
+                        }
+                    }
                 }
                 if let Some(m) = &map {
                     m.draw(&v);

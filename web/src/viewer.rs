@@ -340,7 +340,7 @@ impl Viewer {
             }
             _ => {
                 let before = self.nav.dir();
-                let velocity = self.walk(input, dt as f32);
+                let velocity = self.walk(input, dt as f32, now_ms);
                 let (eye, dir) = (self.nav.eye, self.nav.dir());
                 let turn = view::Motion::between(eye, before, eye, dir, dt as f32).turn;
                 (eye, dir, view::Motion { velocity, turn })
@@ -407,6 +407,8 @@ impl Viewer {
             self.stats.first_complete_frame = Some(self.stats.frames);
             self.stats.first_complete_ms = Some(now_ms);
         }
+        // What a pick reads: the drawn list and the view it was drawn in, set together.
+        self.view_proj = view.camera.view_proj(size.0 as f32 / size.1.max(1) as f32);
         let header = &self.model.header;
         let mut draws = Vec::with_capacity(d.drawn.len());
         self.drawn.clear();
@@ -434,8 +436,7 @@ impl Viewer {
             format: Some(portico_render::COLOR_FORMAT),
             ..Default::default()
         });
-        let view_proj = view.camera.view_proj(size.0 as f32 / size.1.max(1) as f32);
-        self.view_proj = view_proj;
+        let view_proj = self.view_proj;
         // The clusters the traversal drew as boxes: textured where the atlas tile is
         // resident, else in their colours.
         let textured = match &header.hierarchy {
@@ -470,9 +471,9 @@ impl Viewer {
     /// Moves the navigator by what is held for `dt` seconds, walking or flying; returns the
     /// velocity (m/s). Walking, the navigator's move is the walker's wish: walls stop it,
     /// floors carry it, stairs lift it, holes drop it.
-    fn walk(&mut self, input: &Input, dt: f32) -> Vec3 {
+    fn walk(&mut self, input: &Input, dt: f32, now_ms: f64) -> Vec3 {
         let before = self.nav.eye;
-        let flown = input.apply(&mut self.nav, dt);
+        let flown = input.apply(&mut self.nav, dt, now_ms);
         let graph = self.model.graph.as_ref().filter(|g| !g.grid_fallback);
         let (Gait::Walk, Some(graph)) = (self.gait, graph) else {
             self.stats.gait = "fly";
@@ -483,8 +484,11 @@ impl Viewer {
         self.walker
             .gather_header(graph, header, self.pages_learned, before);
         self.nav.eye = self.walker.step(graph, before, self.nav.eye - before, dt);
+        // The velocity the server's lookahead extrapolates: the walk's, along the floor (a step
+        // taken in one frame is not a climb at metres a second).
+        let moved = self.nav.eye - before;
         if dt > 0.0 {
-            (self.nav.eye - before) / dt
+            Vec3::new(moved.x, 0.0, moved.z) / dt
         } else {
             Vec3::ZERO
         }
@@ -492,6 +496,12 @@ impl Viewer {
 
     /// Picks the object drawn at `ndc` (-1..1, y up) of the last frame; keeps it in the stats.
     pub fn pick(&mut self, ndc: [f32; 2]) -> Option<Picked> {
+        let picked = self.picked_at(ndc);
+        self.stats.picked = picked.clone();
+        picked
+    }
+
+    fn picked_at(&self, ndc: [f32; 2]) -> Option<Picked> {
         let (origin, dir) = pick::ray(&self.view_proj, ndc)?;
         let header = &self.model.header;
         let boxes = self
@@ -504,9 +514,7 @@ impl Viewer {
             Some(Resident::Mesh(m)) => m.gpu_bytes(),
             _ => 0,
         };
-        let picked = Picked::of(header, instance, lod, bytes, distance)?;
-        self.stats.picked = Some(picked.clone());
-        Some(picked)
+        Picked::of(header, instance, lod, bytes, distance)
     }
 }
 

@@ -256,9 +256,10 @@ impl Pull {
     pub fn frame(&mut self, f: FrameState, at: Instant, now: Instant) {
         self.schedule.acknowledge(f.consumed, true);
         self.plan.frame(f.lacking, f.incomplete);
-        // Every frame: deadlines come nearer as the answer ages.
-        self.refresh(now, at);
         self.unasked = Some((f.observer, f.held));
+        // Every frame: deadlines come nearer as the answer ages (and the wait for the next
+        // follows this frame's pace).
+        self.refresh(now, at);
     }
 
     /// The client's own need list, most urgent first (demand fetch, the load tester's oracle),

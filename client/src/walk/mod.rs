@@ -66,6 +66,7 @@ const MAX_FALL: f32 = 20.0;
 /// The longest horizontal move checked at once (metres): longer ones are cut into moves this
 /// long, so no probe passes through a thin object between two frames.
 const MAX_MOVE: f32 = 0.1;
+const MAX_MOVES: f32 = 32.0;
 /// The objects gathered around the body reach this far from it horizontally and vertically
 /// (metres), and are gathered again once the body is half that far from where they were.
 const GATHER: [f32; 2] = [6.0, 5.0];
@@ -193,8 +194,10 @@ impl Walker {
     /// as walls and objects let it, climbing steps and stairs, then `dt` seconds of gravity.
     pub fn step(&mut self, graph: &CellGraph, eye: Vec3, wanted: Vec3, dt: f32) -> Vec3 {
         let mut feet = eye - Vec3::Y * self.body.eye;
-        let flat = Vec3::new(wanted.x, 0.0, wanted.z);
-        let moves = (flat.length() / MAX_MOVE).ceil().clamp(1.0, 32.0);
+        // At most `MAX_MOVES` moves of `MAX_MOVE` a frame (48 m/s at 15 frames a second):
+        // anything longer is cut short rather than checked in longer strides.
+        let flat = Vec3::new(wanted.x, 0.0, wanted.z).clamp_length_max(MAX_MOVE * MAX_MOVES);
+        let moves = (flat.length() / MAX_MOVE).ceil().clamp(1.0, MAX_MOVES);
         let part = flat / moves;
         for _ in 0..moves as usize {
             // The whole move, else along each axis alone (sliding along an axis-aligned wall),
@@ -226,6 +229,15 @@ impl Walker {
     pub fn ground(&self, graph: &CellGraph, p: Vec3) -> Option<f32> {
         let from = p + Vec3::Y * self.body.step;
         let mut h = space::floor(graph, self.cell, from)?;
+        // A body stands on whatever floor is under any part of its footprint (it does not drop
+        // through a hole narrower than itself), where that part is on its side of the walls.
+        for off in self.footprint() {
+            if self.reaches(graph, from, off)
+                && let Some(f) = space::floor(graph, self.cell, from + off)
+            {
+                h = h.max(f);
+            }
+        }
         let over =
             |b: &Aabb| b.min[0] <= p.x && p.x <= b.max[0] && b.min[2] <= p.z && p.z <= b.max[2];
         for s in self.solids.iter().filter(|s| over(s)) {
@@ -254,16 +266,18 @@ impl Walker {
     fn free(&self, graph: &CellGraph, from: Vec3, to: Vec3) -> bool {
         let b = &self.body;
         let r = b.radius;
-        let offsets = [
-            Vec3::ZERO,
-            Vec3::X * r,
-            -Vec3::X * r,
-            Vec3::Z * r,
-            -Vec3::Z * r,
-        ];
         for h in [b.step + 0.05, 1.0, b.eye + b.head] {
-            for off in offsets {
-                let lift = off + Vec3::Y * h;
+            let up = Vec3::Y * h;
+            // The centre, and each side probe that is on the centre's side of the walls (one
+            // across a wall thinner than the body's radius — after a jump, or a start by a
+            // wall — says nothing of where the body can go).
+            let probes = std::iter::once(Vec3::ZERO).chain(
+                self.footprint()
+                    .into_iter()
+                    .filter(|&off| self.reaches(graph, from + up, off)),
+            );
+            for off in probes {
+                let lift = off + up;
                 if let Some((t, _)) = space::trace(graph, self.cell, from + lift, to + lift)
                     && t < 1.0
                 {
@@ -284,6 +298,17 @@ impl Walker {
                 .is_some_and(|(low, high)| high > feet.y + b.step && low < feet.y + b.eye + b.head)
         };
         !self.flights.iter().any(|f| cuts(f, to) && !cuts(f, from))
+    }
+
+    /// The body's four side points about its centre (at its radius along each axis).
+    fn footprint(&self) -> [Vec3; 4] {
+        let r = self.body.radius;
+        [Vec3::X * r, -Vec3::X * r, Vec3::Z * r, -Vec3::Z * r]
+    }
+
+    /// Whether `at + off` is reached from `at` through open space (or nothing is known there).
+    fn reaches(&self, graph: &CellGraph, at: Vec3, off: Vec3) -> bool {
+        space::trace(graph, self.cell, at, at + off).is_none_or(|(t, _)| t >= 1.0)
     }
 
     /// The box the body fills above a step, feet at `feet`.

@@ -93,6 +93,11 @@ impl<'a> Session<'a> {
         self.walker.walk(from, to, dt)
     }
 
+    /// Forgets the walk's fall and cell (after flying, or a jump).
+    pub fn reset_walk(&mut self) {
+        self.walker.reset_walk();
+    }
+
     /// An observer at `eye` looking along `dir`, moving with `motion`, with this client's field
     /// of view and announced speeds.
     pub fn observer(&self, eye: Vec3, dir: Vec3, motion: view::Motion) -> Observer {

@@ -52,6 +52,10 @@ impl<'a> Walker<'a> {
     /// The eye walked from `from` towards `to` over `dt` seconds ([`portico_client::walk`]):
     /// walls and furniture stop it, floors carry it, stairs lift it, holes drop it. Without
     /// cells (a model with none, a grid) it goes to `to`.
+    pub(super) fn reset_walk(&mut self) {
+        self.body.reset();
+    }
+
     pub(super) fn walk(&mut self, from: Vec3, to: Vec3, dt: f32) -> Vec3 {
         let Some(graph) = self.model.graph.as_ref().filter(|g| !g.grid_fallback) else {
             return to;

@@ -6,11 +6,11 @@ use super::Shared;
 use crate::conditional::not_modified;
 use crate::encoding::Precompressed;
 use crate::error::Error;
-use crate::respond::{IMMUTABLE, REVALIDATE, built, current, revalidated};
+use crate::respond::{IMMUTABLE, REVALIDATE, built, current};
 use axum::body::{Body, Bytes};
 use axum::extract::{Path, State};
 use axum::http::{HeaderMap, StatusCode, header};
-use axum::response::{IntoResponse, Response};
+use axum::response::Response;
 use portico_data::path::{PathKind, standard};
 use portico_data::person::{TURN_DEGREES, WALK_SPEED};
 
@@ -42,9 +42,52 @@ async fn answer(
     cache: &'static str,
     headers: &HeaderMap,
 ) -> Result<Response, Error> {
+    // Made once: after that no request waits for a compute slot (a revalidation least of all).
+    let made = match s.tour.get() {
+        Some(made) => made.clone(),
+        None => made_on_a_slot(&s).await?,
+    };
+    let Some(json) = made else {
+        return Err(Error::not_found(
+            "this model has no tour (nothing to walk through)",
+        ));
+    };
+    // Gzip where the client takes it: a long tour is hundreds of kilobytes of JSON, which a
+    // page reads before its first frame.
+    let (body, coding) = json.pick(headers);
+    // Each coding is its own representation, with its own strong ETag.
+    let tag = format!(
+        "\"t-{}{}\"",
+        s.database_id,
+        coding.map_or(String::new(), |c| format!("-{c}"))
+    );
+    let status = if not_modified(headers, &tag) {
+        StatusCode::NOT_MODIFIED
+    } else {
+        StatusCode::OK
+    };
+    // A 304 carries the headers the 200 does (RFC 9111 §4.3.4: they update the cached ones).
+    let mut r = Response::builder()
+        .status(status)
+        .header(header::CACHE_CONTROL, cache)
+        .header(header::ETAG, tag)
+        .header(header::VARY, "accept-encoding");
+    if status == StatusCode::NOT_MODIFIED {
+        return built(r.body(Body::empty()));
+    }
+    r = r.header(header::CONTENT_TYPE, portico_protocol::JSON_MIME);
+    if let Some(c) = coding {
+        r = r.header(header::CONTENT_ENCODING, c);
+    }
+    built(r.body(Body::from(body)))
+}
+
+/// The tour, made on a compute slot the first time it is asked for.
+async fn made_on_a_slot(
+    s: &std::sync::Arc<crate::state::AppState>,
+) -> Result<Option<Precompressed>, Error> {
     let state = s.clone();
-    let made = s
-        .compute
+    s.compute
         .run(move |_| {
             let tour = state.tour.get_or_init(|| {
                 let db = state.db();
@@ -67,31 +110,5 @@ async fn answer(
             });
             Ok(tour.clone())
         })
-        .await?;
-    let Some(json) = made else {
-        return Err(Error::not_found(
-            "this model has no tour (nothing to walk through)",
-        ));
-    };
-    // Gzip where the client takes it: a long tour is hundreds of kilobytes of JSON, which a
-    // page reads before its first frame.
-    let (body, coding) = json.pick(headers);
-    // Each coding is its own representation, with its own strong ETag.
-    let tag = format!(
-        "\"t-{}{}\"",
-        s.database_id,
-        coding.map_or(String::new(), |c| format!("-{c}"))
-    );
-    if not_modified(headers, &tag) {
-        return Ok(revalidated(StatusCode::NOT_MODIFIED.into_response(), &tag));
-    }
-    let mut r = Response::builder()
-        .header(header::CONTENT_TYPE, portico_protocol::JSON_MIME)
-        .header(header::CACHE_CONTROL, cache)
-        .header(header::ETAG, tag)
-        .header(header::VARY, "accept-encoding");
-    if let Some(c) = coding {
-        r = r.header(header::CONTENT_ENCODING, c);
-    }
-    built(r.body(Body::from(body)))
+        .await
 }

@@ -246,6 +246,36 @@ fn a_walker_asks_again_once_it_has_moved_turned_or_waited_not_after_every_answer
 }
 
 #[test]
+fn a_failed_ask_is_made_again_after_the_backoff_though_the_observer_stands() {
+    let t0 = Instant::now();
+    let r = Reask::DEFAULT;
+    let mut pull = Pull::new(Policy::default(), 8, 1 << 30);
+    let at = |x: f32| FrameState {
+        observer: crate::engine::test_observer(x),
+        ..frame(vec![], 0)
+    };
+    pull.frame(at(0.0), t0, t0);
+    assert_eq!(asks(&drain(&mut pull, t0)), vec![1]);
+    pull.answered(1, t0, Ok(answer(&[], &[])), ms(t0, 20));
+    // Moved on: asked, and the ask fails.
+    pull.frame(at(r.moved_m), ms(t0, 40), ms(t0, 40));
+    assert_eq!(asks(&drain(&mut pull, ms(t0, 40))), vec![2]);
+    pull.answered(
+        2,
+        ms(t0, 40),
+        Err(Fault::Failed("refused".into())),
+        ms(t0, 60),
+    );
+    // Standing where it was when the ask failed: not during the backoff, then asked again (the
+    // answer in hand is still the one from before it moved).
+    pull.frame(at(r.moved_m), ms(t0, 80), ms(t0, 80));
+    assert!(asks(&drain(&mut pull, ms(t0, 80))).is_empty());
+    let later = ms(t0, 60) + BACKOFF;
+    pull.frame(at(r.moved_m), later, later);
+    assert_eq!(asks(&drain(&mut pull, later)), vec![3]);
+}
+
+#[test]
 fn the_wait_before_the_next_ask_follows_the_pace() {
     let r = Reask::DEFAULT;
     let still = crate::engine::test_observer(0.0);
