@@ -458,7 +458,9 @@ fn a_rebuild_and_a_token_behind_nginx_serve_no_stale_or_unauthorised_byte() {
         policy: Policy::default(),
         out: None,
         png_every: 0,
-        max_frames: Some(80),
+        // Long enough after the rebuild for the pull engine, which asks again only once the
+        // observer has moved on, to ask through a connection that reaches the new file.
+        max_frames: Some(300),
         pace: true,
         fovy: 1.0,
         max_speed: 2.0,
