@@ -90,7 +90,11 @@ async fn wide_paged_sessions_leave_prefetch_answering() {
         ws.send(bincode(&StreamClient::Observer(obs)))
             .await
             .unwrap();
-        sessions.push(ws);
+        // Each session reads what it is pushed, as a client does: one that never reads is
+        // closed at the connection's write timeout (on a slow machine, within this test).
+        let (sink, mut stream) = ws.split();
+        tokio::spawn(async move { while let Some(Ok(_)) = stream.next().await {} });
+        sessions.push(sink);
     }
     // One update per session: pages for the nearest stab lists only.
     let t0 = Instant::now();
